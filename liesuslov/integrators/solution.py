@@ -1,0 +1,102 @@
+"""What an integration returns: arrays with the time axis first, statistics, status."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Solution"]
+
+_ARRAYS = ("t", "xi", "omega", "Gamma", "g")
+
+
+@dataclass
+class Solution:
+    """The result of :func:`liesuslov.integrate`.
+
+    Arrays put the time axis first, then the batch axes: ``sol.Gamma[k]`` is the state at ``sol.t[k]``.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+    xi : ndarray, shape (N, ..., k)
+        Reduced coordinates of Omega in the constraint subspace's basis (what was integrated).
+    omega : ndarray, shape (N, ..., d)
+        Coordinates of Omega in the algebra basis.
+    Gamma : ndarray, shape (N, ..., n), or None
+        The vertical in body coordinates, when the scene has it.
+    g : ndarray, shape (N, ..., n, n), or None
+        The attitude (in the algebra's matrix representation), when reconstructed.
+    stats : dict
+        ``nfev`` (vector-field evaluations; one batched call counts once), ``steps`` (accepted),
+        ``rejected``, ``method``, ``chart``, ``form``, ``state_dim``, ``batch``, ``wall_time``.
+    status : int
+        0 success, -1 failure (see ``message``).
+    message : str
+    n : int or None
+        Matrix size of the representation (n for so(n)); used by :attr:`Omega`.
+    """
+
+    t: np.ndarray
+    xi: np.ndarray
+    omega: np.ndarray
+    Gamma: np.ndarray | None = None
+    g: np.ndarray | None = None
+    stats: dict = field(default_factory=dict)
+    status: int = 0
+    message: str = "The solver successfully reached the end of the integration interval."
+    n: int | None = None
+    algebra_name: str = ""
+
+    @property
+    def success(self) -> bool:
+        """True when the integration reached the end of ``t_span``."""
+        return self.status == 0
+
+    @property
+    def Omega(self) -> np.ndarray | None:
+        """Omega as skew matrices (N, ..., n, n) on so(n); None on other algebras."""
+        if not self.algebra_name.startswith("so(") or self.n is None:
+            return None
+        from ..algebra import so
+
+        return so(self.n).hat(self.omega)
+
+    def __repr__(self) -> str:
+        shape = self.omega.shape
+        parts = [f"t: {self.t.shape}", f"omega: {shape}"]
+        if self.Gamma is not None:
+            parts.append(f"Gamma: {self.Gamma.shape}")
+        if self.g is not None:
+            parts.append(f"g: {self.g.shape}")
+        return f"Solution(success={self.success}, {', '.join(parts)}, message={self.message!r})"
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path) -> Path:
+        """Write every array, the stats and the status to a ``.npz`` file (lossless round trip)."""
+        path = Path(path)
+        arrays = {name: getattr(self, name) for name in _ARRAYS if getattr(self, name) is not None}
+        meta = {"stats": self.stats, "status": self.status, "message": self.message, "n": self.n,
+                "algebra_name": self.algebra_name}
+        np.savez(path, **arrays, __meta__=np.array(json.dumps(meta, default=_jsonable)))
+        return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+    @classmethod
+    def load(cls, path) -> Solution:
+        """Read a file written by :meth:`save`."""
+        with np.load(Path(path), allow_pickle=False) as data:
+            arrays = {name: data[name] for name in _ARRAYS if name in data.files}
+            meta = json.loads(str(data["__meta__"]))
+        return cls(**arrays, stats=meta["stats"], status=meta["status"], message=meta["message"],
+                   n=meta["n"], algebra_name=meta["algebra_name"])
+
+
+def _jsonable(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return str(x)
