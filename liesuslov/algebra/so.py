@@ -83,6 +83,8 @@ class SpecialOrthogonalAlgebra(LieAlgebra):
     def hat(self, x) -> np.ndarray:
         """Coordinates to skew matrices: ``(..., d) -> (..., n, n)``, ``X[i, j] = x_ij``, ``X[j, i] = -x_ij``."""
         x = np.asarray(x, dtype=float)
+        if x.shape[-1:] != (self._dim,):
+            raise ValueError(f"x must have shape (..., {self._dim}) for {self.name}, got {x.shape}")
         X = np.zeros(x.shape[:-1] + (self.n, self.n))
         X[..., self._rows, self._cols] = x
         X[..., self._cols, self._rows] = -x
@@ -91,6 +93,8 @@ class SpecialOrthogonalAlgebra(LieAlgebra):
     def vee(self, X) -> np.ndarray:
         """Skew matrices to coordinates: ``(..., n, n) -> (..., d)``, the upper-triangle entries."""
         X = np.asarray(X, dtype=float)
+        if X.shape[-2:] != (self.n, self.n):
+            raise ValueError(f"X must have shape (..., {self.n}, {self.n}) for {self.name}, got {X.shape}")
         return X[..., self._rows, self._cols]
 
     # ------------------------------------------------------------------ operations

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .._validation import as_float_array
+from .._validation import as_float_array, check_symmetric
 from .lie import LieAlgebra
 
 __all__ = ["Subspace", "is_symmetric_pair", "suslov_distribution"]
@@ -143,6 +143,9 @@ class Subspace:
         d = self.algebra.dim
         if K.shape != (d, d):
             raise ValueError(f"metric must have shape ({d}, {d}), got {K.shape}")
+        check_symmetric(K, "metric")
+        if np.linalg.eigvalsh(0.5 * (K + K.T))[0] <= 0:
+            raise ValueError("metric must be positive definite (an inertia matrix or another SPD K)")
         if self.dim == 0:
             return np.zeros((d, d))
         return B.T @ np.linalg.solve(B @ K @ B.T, B @ K)

@@ -52,17 +52,16 @@ class RKMKStepper:
         self.m = model.n if mode != "none" else 0
         self.nfev = 0
         s = tableau.A.shape[0]
+        self.err_weights = [np.asarray(e) for e in tableau.error_weights]
         # Error estimators that use the derivative at the new point need one more evaluation.
-        err_len = max((len(e) for e in _error_weights(tableau)), default=s)
-        self.s_eval = max(s, err_len)
+        self.s_eval = max([s] + [len(e) for e in self.err_weights])
         self.nk = batch * self.k
         self.ng = batch * self.m * self.m
         self.Z = np.zeros((self.s_eval, self.nk + self.ng))
-        self.A_rows = [np.ascontiguousarray(tableau.A[i, :i]) for i in range(s)]
+        self.A_rows = tableau.a_rows
         self.b = np.ascontiguousarray(tableau.b)
         # FSAL: the last stage sits at the new point (its A row is b), so it is the next stage 0.
         self.fsal = s > 1 and bool(np.allclose(tableau.A[-1], tableau.b)) and tableau.c[-1] == 1.0
-        self.err_weights = _error_weights(tableau)
         self._first = None  # (L, Omega) at the current point: stage 0 of the next step
         self._new = None  # the same at the point the last step reached, if it came for free
 
@@ -171,13 +170,3 @@ class RKMKStepper:
         ex = h * z[: self.nk].reshape(self.B, self.k)
         eg = h * z[self.nk:].reshape(self.B, self.m, self.m) if self.mode != "none" else None
         return ex, eg
-
-
-def _error_weights(tab: ButcherTableau) -> list[np.ndarray]:
-    """The error-estimator weight vectors of a tableau: ``[E]`` for ordinary pairs, ``[E5, E3]`` for DOP853."""
-    if getattr(tab, "E5", None) is not None:
-        return [np.asarray(tab.E5), np.asarray(tab.E3)]
-    if getattr(tab, "b_hat", None) is not None:
-        e = np.asarray(tab.b) - np.asarray(tab.b_hat)
-        return [e]
-    return []
