@@ -1,0 +1,476 @@
+"""Potentials, SuslovSystem (reference form, diagnostics, validation) and the models of each form."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from liesuslov.algebra import Inertia, Subspace, se, so, suslov_distribution
+from liesuslov.mechanics import (
+    FamilyPotential,
+    LinearPotential,
+    Potential,
+    QuadraticPotential,
+    SuslovSystem,
+    ZeroPotential,
+    check_gradient,
+)
+from liesuslov.mechanics import models as models_module
+from liesuslov.mechanics.system import gyroscopic_torque
+
+RTOL = 1e-12  # forms against the reference: rounding level, relative to the size of the field
+
+seeds = st.integers(0, 2**32 - 1)
+
+
+def unit(rng, shape, n):
+    G = rng.standard_normal(tuple(shape) + (n,))
+    return G / np.linalg.norm(G, axis=-1, keepdims=True)
+
+
+def random_spd(rng, n, lo=1.0):
+    A = rng.standard_normal((n, n))
+    return A @ A.T / n + lo * np.eye(n)
+
+
+def cubic_potential(n):
+    """A general (non-polynomial-structured) potential with its exact gradient."""
+    c = np.linspace(0.5, 1.5, n)
+
+    def V(G):
+        return np.sin(G @ c) + 0.5 * G[..., 0] ** 3
+
+    def grad(G):
+        g = np.cos(G @ c)[..., None] * c
+        g[..., 0] += 1.5 * G[..., 0] ** 2
+        return g
+    return Potential(V, grad, n=n)
+
+
+def family_potential():
+    return FamilyPotential(lambda s, r: s ** 3 + s * r, lambda s, r: (3 * s ** 2 + r, s),
+                           lambda t, q: np.cos(t) * q, lambda t, q: (-np.sin(t) * q, np.cos(t)))
+
+
+# ====================================================================== potentials
+def test_linear_and_quadratic_values_batched():
+    rng = np.random.default_rng(0)
+    G = unit(rng, (4, 2), 3)
+    B = np.array([1.0, -2.0, 0.5])
+    P = LinearPotential(B)
+    assert P.kind == "linear" and P.n == 3
+    np.testing.assert_allclose(P.V(G), G @ B)
+    np.testing.assert_allclose(P.grad(G), np.broadcast_to(B, G.shape))
+    Q = QuadraticPotential(B)
+    assert Q.diagonal is not None
+    np.testing.assert_allclose(Q.V(G), 0.5 * np.sum(B * G ** 2, axis=-1))
+    np.testing.assert_allclose(Q.grad(G), B * G)
+    S = random_spd(rng, 3)
+    Qm = QuadraticPotential(S)
+    assert Qm.diagonal is None
+    np.testing.assert_allclose(Qm.V(G), 0.5 * np.einsum("...i,ij,...j->...", G, S, G))
+    assert QuadraticPotential(np.diag(B)).diagonal is not None
+    Z = ZeroPotential()
+    assert Z.is_zero and Z.V(G).shape == (4, 2) and not Z.grad(G).any()
+
+
+@settings(max_examples=25, deadline=None)
+@given(seeds, st.integers(2, 7))
+def test_builtin_gradients_pass_the_checker(seed, n):
+    rng = np.random.default_rng(seed)
+    for P in (LinearPotential(rng.standard_normal(n)), QuadraticPotential(rng.standard_normal(n)),
+              QuadraticPotential(random_spd(rng, n)), cubic_potential(n)):
+        assert check_gradient(P, seed=seed).ok
+
+
+def test_family_potential_gradient():
+    assert check_gradient(family_potential()).max_error < 1e-7
+
+
+def test_gradient_checker_finds_a_wrong_gradient():
+    wrong = Potential(lambda G: G[..., 0] ** 2 * G[..., 1], lambda G: np.stack(
+        [2 * G[..., 0] * G[..., 1], 2 * G[..., 0] ** 2, 0 * G[..., 2]], -1), n=3)  # d/dG_1 is G_0^2
+    report = check_gradient(wrong)
+    assert not report.ok and report.max_error > 0.1
+    worst = report.worst_point
+    np.testing.assert_allclose(report.finite_difference[1], worst[0] ** 2, atol=1e-8)
+    assert "WRONG" in str(report)
+    with pytest.raises(ValueError, match="grad disagrees"):
+        check_gradient(wrong, raise_error=True)
+    with pytest.raises(ValueError, match="grad disagrees"):
+        wrong.check_gradient(np.array([[0.6, 0.8, 0.0]]), raise_error=True)
+
+
+def test_potential_validation():
+    with pytest.raises(TypeError, match="V must be a callable"):
+        Potential(1.0, lambda G: G)
+    with pytest.raises(TypeError, match="grad must be a callable"):
+        Potential(lambda G: G[..., 0], None)
+    with pytest.raises(ValueError, match="B must be symmetric"):
+        QuadraticPotential([[1.0, 2.0], [0.0, 1.0]])
+    with pytest.raises(ValueError, match="B must have shape"):
+        QuadraticPotential(np.ones((2, 3)))
+    with pytest.raises(ValueError, match="B must be a vector"):
+        LinearPotential(np.ones((2, 2)))
+    with pytest.raises(ValueError, match="n is required"):
+        check_gradient(Potential(lambda G: G[..., 0], lambda G: G))
+
+
+# ====================================================================== systems: validation
+def fk_system(I, potential=None, gyroscopic=0.0, constraints=None):
+    return SuslovSystem(Inertia.from_mass_tensor(I), constraints=constraints, potential=potential,
+                        gyroscopic=gyroscopic)
+
+
+def sleigh(I=1.0, m=2.0, a=0.5):
+    """Chaplygin-sleigh-like EPS system on se(2): (omega, v_x, v_y), no sideways slip v_y = 0."""
+    alg = se(2)
+    K = np.array([[I + m * a * a, 0.0, m * a], [0.0, m, 0.0], [m * a, 0.0, m]])
+    return SuslovSystem(Inertia(alg, K), constraints=Subspace.annihilator(alg, [[0.0, 0.0, 1.0]]))
+
+
+def test_system_rejects_bad_input():
+    J = Inertia.from_mass_tensor([1.0, 2.0, 3.0, 4.0])
+    with pytest.raises(TypeError, match="inertia"):
+        SuslovSystem(np.eye(6))
+    with pytest.raises(ValueError, match="symmetric"):
+        Inertia.from_mass_tensor([[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    with pytest.raises(ValueError, match="gyroscopic"):
+        SuslovSystem(J, gyroscopic=0.5)
+    with pytest.raises(ValueError, match="potential acts on Gamma of dimension 3"):
+        SuslovSystem(J, potential=LinearPotential([1.0, 0.0, 0.0]))
+    with pytest.raises(TypeError, match="potential must be a Potential"):
+        SuslovSystem(J, potential=np.ones(4))
+    with pytest.raises(ValueError, match="potential.grad must map"):
+        SuslovSystem(J, potential=Potential(lambda G: G[..., 0], lambda G: G[..., :2]))
+    with pytest.raises(TypeError, match="constraints must be a Subspace"):
+        SuslovSystem(J, constraints=np.eye(6)[:3])
+    with pytest.raises(ValueError, match="constraints live in"):
+        SuslovSystem(J, constraints=suslov_distribution(3))
+    alg = se(2)
+    K = np.diag([1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match="constraints are required"):
+        SuslovSystem(Inertia(alg, K))
+    D = Subspace.annihilator(alg, [[0.0, 0.0, 1.0]])
+    with pytest.raises(ValueError, match="potential must be None on se"):
+        SuslovSystem(Inertia(alg, K), D, potential=LinearPotential([1.0, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="gyroscopic must be 0 on se"):
+        SuslovSystem(Inertia(alg, K), D, gyroscopic=1.0)
+    SuslovSystem(Inertia(alg, K), D, potential=ZeroPotential())  # V = 0 is fine
+
+
+def test_methods_validate_omega_and_gamma():
+    s = fk_system([1.0, 2.0, 3.0, 4.0], QuadraticPotential([4.0, 3.0, 2.0, 1.0]))
+    G = np.array([0.0, 0.0, 0.6, 0.8])
+    with pytest.raises(ValueError, match="Omega must be"):
+        s.energy(np.ones(5), G)
+    with pytest.raises(ValueError, match="Omega as \\(4, 4\\) matrices must be skew-symmetric"):
+        s.energy(np.ones((4, 4)), G)
+    with pytest.raises(ValueError, match="Gamma is required"):
+        s.energy(np.zeros(6))
+    with pytest.raises(ValueError, match="Gamma must have shape"):
+        s.rhs(np.zeros(6), np.ones(3))
+    with pytest.raises(ValueError, match="NaN"):
+        s.multipliers(np.full(6, np.nan), G)
+    with pytest.raises(ValueError, match="Omega is not in D"):
+        s.divergence(np.ones(6), G)
+    with pytest.raises(ValueError, match="gamma=False is impossible"):
+        s.model(gamma=False)
+    with pytest.raises(TypeError, match="gamma must be"):
+        s.model(gamma="yes")
+    with pytest.raises(ValueError, match="form must be one of"):
+        s.model(form="fast")
+    free = fk_system(random_spd(np.random.default_rng(1), 4))
+    with pytest.raises(ValueError, match="form='symmetric' does not hold.*not an invariant subspace"):
+        free.model(form="symmetric")
+    with pytest.raises(ValueError, match="form='eigenspace' does not hold"):
+        free.model(form="eigenspace")
+    with pytest.raises(ValueError, match="gamma=True needs a body in SO"):
+        sleigh().model(gamma=True)
+
+
+def test_omega_as_matrices_or_coordinates():
+    s = fk_system([1.0, 2.0, 3.0], LinearPotential([0.0, 0.0, 1.0]))
+    alg = so(3)
+    x = np.array([[0.0, 0.3, -0.2], [0.0, -0.1, 0.5]])
+    G = unit(np.random.default_rng(0), (2,), 3)
+    np.testing.assert_allclose(s.energy(alg.hat(x), G), s.energy(x, G))
+    np.testing.assert_allclose(s.rhs(alg.hat(x), G)[0], s.rhs(x, G)[0])
+
+
+# ====================================================================== the equations
+def test_gyroscopic_torque_is_the_vector_form():
+    rng = np.random.default_rng(3)
+    x, G = rng.standard_normal((2, 5, 3))
+    w = so(3).to_vector3(x)
+    want = so(3).from_vector3(0.7 * np.cross(G, w))
+    np.testing.assert_allclose(gyroscopic_torque(x, G, 0.7), want, atol=1e-15)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seeds)
+def test_reference_form_is_the_papers_vector_form(seed):
+    """(3.1): J w' = J w x w + Gamma x dV/dGamma + eps Gamma x w + lambda a,  Gamma' = Gamma x w, w3 = 0."""
+    rng = np.random.default_rng(seed)
+    Jw = random_spd(rng, 3)  # a full symmetric J: a = e3 is not an eigenvector
+    eps = rng.normal()
+    s = SuslovSystem(Inertia.from_principal_moments(Jw), potential=cubic_potential(3), gyroscopic=eps)
+    w = np.array([rng.normal(), rng.normal(), 0.0])
+    G = unit(rng, (), 3)
+    f = np.cross(Jw @ w, w) + np.cross(G, s.potential.grad(G)) + eps * np.cross(G, w)
+    e3 = np.array([0.0, 0.0, 1.0])
+    Jinv = np.linalg.inv(Jw)
+    lam = -(e3 @ Jinv @ f) / (e3 @ Jinv @ e3)
+    wdot = Jinv @ (f + lam * e3)
+    xdot, Gdot = s.rhs(so(3).from_vector3(w), G)
+    np.testing.assert_allclose(so(3).to_vector3(xdot), wdot, atol=1e-12 * (1 + np.abs(wdot).max()))
+    np.testing.assert_allclose(Gdot, np.cross(G, w), atol=1e-14)
+    np.testing.assert_allclose(s.multipliers(so(3).from_vector3(w), G), [-lam], rtol=1e-10, atol=1e-12)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seeds, st.integers(3, 5), st.integers(1, 4))
+def test_energy_is_conserved_by_the_reference_field_for_any_D(seed, n, r):
+    """dE/dt = <J Omega, Omega'> + <dV, Gamma'> = 0 for random constraints, mass tensor and potential."""
+    rng = np.random.default_rng(seed)
+    alg = so(n)
+    r = min(r, alg.dim - 1)
+    D = Subspace.annihilator(alg, rng.standard_normal((r, alg.dim)))
+    s = fk_system(random_spd(rng, n), cubic_potential(n), constraints=D)
+    x = rng.standard_normal((3, D.dim)) @ D.basis
+    G = unit(rng, (3,), n)
+    xdot, Gdot = s.rhs(x, G)
+    dE = np.sum(s.inertia(x) * xdot, axis=-1) + np.sum(s.potential.grad(G) * Gdot, axis=-1)
+    np.testing.assert_allclose(dE, 0.0, atol=1e-11 * (1 + np.abs(xdot).max()))
+    assert np.all(D.contains(xdot, 1e-10))  # the constraints hold at first order
+
+
+# ====================================================================== the forms
+def coordinate_subspace(n, pairs):
+    alg = so(n)
+    return Subspace(alg, np.eye(alg.dim)[[alg.index(i, j) for i, j in pairs]])
+
+
+def scene_list():
+    """(label, system, expected auto form) covering every path of the models."""
+    rng = np.random.default_rng(7)
+    I4 = np.array([1.0, 2.0, 3.0, 4.0])
+    block = np.diag([1.0, 2.0, 3.0, 4.0])
+    block[0, 1] = block[1, 0] = 0.4  # I' non-diagonal, I_in = 0: D still J-invariant, K_D not diagonal
+    permuted_fk = Subspace(so(4), suslov_distribution(4).basis[[2, 0, 1]])
+    grassmann = coordinate_subspace(4, [(0, 2), (0, 3), (1, 2), (1, 3)])  # p of (so(4), so(2) + so(2))
+    eigen_only = coordinate_subspace(4, [(0, 1), (0, 2), (2, 3)])
+    random_D = Subspace.annihilator(so(5), rng.standard_normal((4, 10)))
+    S4 = random_spd(rng, 4)
+    return [
+        ("fk zero", fk_system(I4), "symmetric"),
+        ("fk linear", fk_system(I4, LinearPotential([0.3, -0.2, 0.5, 0.7])), "symmetric"),
+        ("fk kharlamova", fk_system(I4, LinearPotential([0.3, -0.2, 0.5, 0.0])), "symmetric"),
+        ("fk lagrange", fk_system([1.0, 1.0, 1.0, 2.0], LinearPotential([0.0, 0.0, 0.0, 0.7])), "symmetric"),
+        ("fk quadratic diag", fk_system(I4, QuadraticPotential([4.0, 3.0, 2.0, 1.0])), "symmetric"),
+        ("fk quadratic matrix", fk_system(I4, QuadraticPotential(S4)), "symmetric"),
+        ("fk general", fk_system(I4, cubic_potential(4)), "symmetric"),
+        ("fk family", fk_system([1.0, 2.0, 3.0], family_potential()), "symmetric"),
+        ("fk gyro V=0", fk_system([1.0, 2.0, 3.0], gyroscopic=0.7), "symmetric"),
+        ("fk gyro quad", fk_system([1.0, 2.0, 3.0], QuadraticPotential([1.0, 2.0, 0.5]), 0.7), "symmetric"),
+        ("fk block I", fk_system(block, QuadraticPotential([4.0, 3.0, 2.0, 1.0])), "symmetric"),
+        ("fk block I gyro", fk_system([[1.0, 0.3, 0.0], [0.3, 2.0, 0.0], [0.0, 0.0, 3.0]],
+                                      cubic_potential(3), 0.4), "symmetric"),
+        ("permuted fk basis", fk_system(I4, QuadraticPotential(S4), constraints=permuted_fk), "symmetric"),
+        ("grassmannian", fk_system(I4, cubic_potential(4), constraints=grassmann), "symmetric"),
+        ("eigenspace only", fk_system(I4, LinearPotential([0.3, -0.2, 0.5, 0.7]), constraints=eigen_only),
+         "eigenspace"),
+        ("suslov free", fk_system(random_spd(rng, 4)), "reduced"),
+        ("reduced + V + gyro", fk_system(random_spd(rng, 3), QuadraticPotential([1.0, 2.0, 0.5]), 0.9),
+         "reduced"),
+        ("random D so(5)", fk_system(random_spd(rng, 5), cubic_potential(5), constraints=random_D),
+         "reduced"),
+        ("sleigh se(2)", sleigh(), "reduced"),
+        ("se(3)", SuslovSystem(Inertia(se(3), random_spd(rng, 6)),
+                               Subspace.annihilator(se(3), rng.standard_normal((2, 6)))), "reduced"),
+    ]
+
+
+SCENES = scene_list()
+
+
+def check_against_reference(s, form, seed=0, gamma=None):
+    rng = np.random.default_rng(seed)
+    m = s.model(gamma=gamma, form=form)
+    ref = s.model(gamma=gamma, form="multiplier")
+    xi = rng.standard_normal((4, m.k))
+    G = unit(rng, (4,), s.n) if m.has_gamma else None
+    x = m.omega_coords(xi)
+    want, Gwant = s.rhs(x, G)
+    got = m.omega_coords(m.xi_dot(xi, G))
+    scale = 1.0 + np.abs(want).max()
+    np.testing.assert_allclose(got, want, rtol=0, atol=RTOL * scale)
+    np.testing.assert_allclose(ref.xi_dot(x, G), want, rtol=0, atol=RTOL * scale)
+    np.testing.assert_allclose(m.xi_from_coords(x), xi, atol=1e-14)
+    if m.n is not None:
+        np.testing.assert_allclose(m.omega_matrix(xi), s.algebra.hat(x), atol=1e-14)
+    if m.has_gamma:
+        np.testing.assert_allclose(m.Gamma_dot(xi, G), Gwant, atol=1e-14)
+        np.testing.assert_allclose(m.Gamma_dot(xi, G), -(s.algebra.hat(x) @ G[..., None])[..., 0], atol=1e-14)
+
+
+@pytest.mark.parametrize("label,system,auto", SCENES, ids=[s[0] for s in SCENES])
+def test_every_form_agrees_with_the_reference(label, system, auto):
+    assert system.model().form == auto
+    forms = system.available_forms()
+    assert forms[0] == auto and forms[-2:] == ["reduced", "multiplier"]
+    for form in forms:
+        check_against_reference(system, form)
+        if system.is_so and not system.needs_gamma:
+            check_against_reference(system, form, gamma=True)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seeds, st.integers(3, 7))
+def test_fk_symmetric_form_agrees_for_random_diagonal_bodies(seed, n):
+    rng = np.random.default_rng(seed)
+    I = rng.uniform(0.5, 3.0, n)
+    for pot in (QuadraticPotential(rng.normal(size=n)), LinearPotential(rng.normal(size=n)),
+                cubic_potential(n)):
+        s = fk_system(I, pot)
+        m = s.model()
+        assert m.form == "symmetric" and m.fedorov_kozlov and "O(n)" in m.path
+        check_against_reference(s, "symmetric", seed)
+
+
+def test_quadratic_term_by_commutators(monkeypatch):
+    """The large-k path (matrix commutators instead of the k^3 tensor) agrees with the reference."""
+    monkeypatch.setattr(models_module, "_TENSOR_MAX_K", 0)
+    rng = np.random.default_rng(5)
+    for s in (fk_system(random_spd(rng, 5), cubic_potential(5)),
+              fk_system(random_spd(rng, 4), QuadraticPotential(random_spd(rng, 4)),
+                        constraints=Subspace.annihilator(so(4), rng.standard_normal((2, 6))))):
+        m = s.model(form="reduced")
+        assert "commutators" in m.path
+        check_against_reference(s, "reduced")
+
+
+def test_fk_xi_dot_closed_form():
+    """(4.3): (I_i + I_n) xi_i' = dV_i Gamma_n - Gamma_i dV_n."""
+    rng = np.random.default_rng(11)
+    I = np.array([1.0, 1.5, 2.5, 3.0, 4.0])
+    pot = cubic_potential(5)
+    m = fk_system(I, pot).model()
+    xi = rng.normal(size=(3, 4))
+    G = unit(rng, (3,), 5)
+    g = pot.grad(G)
+    want = (g[:, :4] * G[:, 4:] - G[:, :4] * g[:, 4:]) / (I[:4] + I[4])
+    np.testing.assert_allclose(m.xi_dot(xi, G), want, atol=1e-15)
+
+
+# ====================================================================== the model object
+def test_model_attributes_and_gamma_selection():
+    I4 = [1.0, 2.0, 3.0, 4.0]
+    m = fk_system(I4, QuadraticPotential([4.0, 3.0, 2.0, 1.0])).model()
+    summary = (m.form, m.k, m.n, m.has_gamma, m.state_dim, m.fedorov_kozlov)
+    assert summary == ("symmetric", 3, 4, True, 7, True)
+    assert m.algebra is so(4) and m.subspace.dim == 3 and m.system.model() is m
+    assert "symmetric" in m.description() and "7" in m.description()
+    free = fk_system(I4)
+    m0 = free.model()
+    assert not m0.has_gamma and m0.state_dim == 3 and "Gamma (V = 0)" in m0.description()
+    assert free.model(gamma=True).state_dim == 7
+    np.testing.assert_array_equal(m0.xi_dot(np.ones(3), None), 0.0)  # J(D) ⊂ D, V = 0: Omega constant
+    mult = free.model(form="multiplier")
+    assert mult.k == 6 and not mult.fedorov_kozlov and mult.subspace.dim == 6
+    permuted = Subspace(so(4), suslov_distribution(4).basis[[1, 0, 2]])
+    assert not fk_system(I4, constraints=permuted).model().fedorov_kozlov
+    gyro = fk_system([1.0, 2.0, 3.0], gyroscopic=0.3).model()
+    assert gyro.has_gamma and gyro.state_dim == 5  # the gyroscopic term needs Gamma even with V = 0
+    sl = sleigh().model()
+    summary = (sl.form, sl.has_gamma, sl.n, sl.k, sl.state_dim, sl.fedorov_kozlov)
+    assert summary == ("reduced", False, 3, 2, 2, False)
+
+
+def test_model_batches_and_broadcasts():
+    s = fk_system([1.0, 2.0, 3.0, 4.0], QuadraticPotential(random_spd(np.random.default_rng(0), 4)))
+    rng = np.random.default_rng(1)
+    xi = rng.normal(size=(2, 5, 3))
+    G = unit(rng, (2, 5), 4)
+    for form in s.available_forms():
+        m = s.model(form=form)
+        xk = xi if form != "multiplier" else m.xi_from_coords(s.model().omega_coords(xi))
+        assert m.xi_dot(xk, G).shape == (2, 5, m.k)
+        assert m.xi_dot(xk[0, 0], G).shape == (2, 5, m.k)  # one Omega, many Gamma
+        assert m.omega_matrix(xk).shape == (2, 5, 4, 4)
+        assert m.Gamma_dot(xk, G).shape == (2, 5, 4)
+        y = np.concatenate([xk[0, 0], G[0, 0]])
+        assert m.vector_field(0.0, y).shape == (m.state_dim,)
+
+
+def test_fk_model_at_n64_is_linear_in_n():
+    n = 64
+    I = np.linspace(1.0, 2.0, n)
+    B = np.linspace(3.0, 1.0, n)
+    m = fk_system(I, QuadraticPotential(B)).model()
+    rng = np.random.default_rng(0)
+    xi = rng.normal(size=n - 1)
+    G = unit(rng, (), n)
+    want = (B[:-1] - B[-1]) * G[:-1] * G[-1] / (I[:-1] + I[-1])
+    np.testing.assert_allclose(m.xi_dot(xi, G), want, rtol=1e-14)
+    Om = m.omega_matrix(xi)
+    np.testing.assert_array_equal(Om[:-1, :-1], 0.0)
+    np.testing.assert_allclose(m.Gamma_dot(xi, G), -Om @ G, atol=1e-14)
+
+
+# ====================================================================== divergence and multipliers
+def fd_divergence(m, xi, G, h=1e-6):
+    tot = 0.0
+    for a in range(m.k):
+        e = np.zeros(m.k)
+        e[a] = h
+        tot += (m.xi_dot(xi + e, G)[a] - m.xi_dot(xi - e, G)[a]) / (2 * h)
+    if m.has_gamma:
+        for j in range(m.n):
+            e = np.zeros(m.n)
+            e[j] = h
+            tot += (m.Gamma_dot(xi, G + e)[j] - m.Gamma_dot(xi, G - e)[j]) / (2 * h)
+    return tot
+
+
+@pytest.mark.parametrize("label,system,auto", SCENES, ids=[s[0] for s in SCENES])
+def test_divergence_is_the_trace_of_the_jacobian(label, system, auto):
+    rng = np.random.default_rng(2)
+    m = system.model(form="reduced")
+    xi = rng.normal(size=m.k)
+    G = unit(rng, (), system.n) if m.has_gamma else None
+    div = system.divergence(m.omega_coords(xi), G)
+    np.testing.assert_allclose(div, fd_divergence(m, xi, G), atol=1e-7)
+    if auto in ("symmetric", "eigenspace"):
+        assert abs(div) < 1e-13  # J(D) ⊂ D on so(n): the measure d Omega d Gamma is invariant
+    if label in ("suslov free", "random D so(5)"):
+        assert abs(div) > 1e-3
+
+
+def test_sleigh_has_no_invariant_measure_and_conserves_energy():
+    from scipy.integrate import solve_ivp
+
+    s = sleigh()
+    m = s.model()
+    sol = solve_ivp(m.vector_field, (0.0, 40.0), [1.0, 0.2], method="DOP853", rtol=1e-12, atol=1e-12)
+    x = m.omega_coords(sol.y.T)
+    E = s.energy(x)
+    assert np.max(np.abs(E - E[0])) < 1e-10
+    assert abs(x[-1, 0]) < 1e-3 * abs(x[0, 0])  # the rotation dies out: v_x carries the energy
+    assert abs(s.divergence(x[0])) > 1e-3
+
+
+def test_multipliers_of_the_fk_symmetric_form():
+    """lambda_ij = (I_i - I_j) Omega_in Omega_jn - (dV_i Gamma_j - Gamma_i dV_j), i < j < n."""
+    rng = np.random.default_rng(4)
+    n = 5
+    I = rng.uniform(1.0, 3.0, n)
+    pot = cubic_potential(n)
+    s = fk_system(I, pot)
+    m = s.model()
+    xi = rng.normal(size=(2, n - 1))
+    G = unit(rng, (2,), n)
+    g = pot.grad(G)
+    r, c = np.triu_indices(n - 1, 1)
+    want = (I[r] - I[c]) * xi[:, r] * xi[:, c] - (g[:, r] * G[:, c] - G[:, r] * g[:, c])
+    np.testing.assert_allclose(s.multipliers(m.omega_coords(xi), G), want, atol=1e-12)
