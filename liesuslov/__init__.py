@@ -1,12 +1,64 @@
 """liesuslov: nonholonomic rigid-body dynamics on Lie groups with structure-exact integrators.
 
-The public names are listed in ``docs/api.md``; the conventions in ``docs/concepts.md``.
+Layers (lower never import higher): :mod:`.algebra` → :mod:`.groups` → :mod:`.mechanics` →
+:mod:`.integrators` → :mod:`.reduction`, :mod:`.analytic` → :mod:`.bench`, :mod:`.cli`.
+The conventions are in ``docs/concepts.md``; the public names in ``docs/api.md``.
 """
 
-from .algebra import (Inertia, LieAlgebra, SpecialOrthogonalAlgebra, Subspace, hat3, is_symmetric_pair,
-                      pairing, se, so, suslov_distribution, vee3, wedge)
+from . import analytic, interop
+from .algebra import (
+                      Inertia,
+                      LieAlgebra,
+                      SpecialOrthogonalAlgebra,
+                      Subspace,
+                      hat3,
+                      is_symmetric_pair,
+                      pairing,
+                      se,
+                      so,
+                      suslov_distribution,
+                      vee3,
+                      wedge,
+)
+from .integrators import METHODS, Solution, integrate
+from .mechanics import (
+                      CASES,
+                      FORMS,
+                      Case,
+                      CaseEntry,
+                      FamilyPotential,
+                      GradientCheck,
+                      LinearPotential,
+                      Model,
+                      Potential,
+                      QuadraticPotential,
+                      SuslovSystem,
+                      ZeroPotential,
+                      cases,
+                      check_gradient,
+)
+from .reduction import (
+                      LagrangeParameters,
+                      PendulumSolution,
+                      ReductionCheck,
+                      SphericalPendulum,
+                      check_lagrange_reduction,
+                      integrate_pendulum,
+                      lagrange_parameters,
+                      lift,
+                      momentum_map,
+                      pendulum_energy,
+                      pendulum_momentum,
+                      to_spherical_pendulum,
+)
 
 __version__ = "0.1.0"
 
 __all__ = ["LieAlgebra", "se", "so", "SpecialOrthogonalAlgebra", "wedge", "pairing", "hat3", "vee3",
-           "Subspace", "is_symmetric_pair", "suslov_distribution", "Inertia", "__version__"]
+           "Subspace", "is_symmetric_pair", "suslov_distribution", "Inertia",
+           "Potential", "LinearPotential", "QuadraticPotential", "FamilyPotential", "ZeroPotential",
+           "check_gradient", "GradientCheck", "SuslovSystem", "Model", "FORMS", "Case", "CaseEntry", "CASES",
+           "cases", "integrate", "METHODS", "Solution", "interop", "analytic",
+           "to_spherical_pendulum", "pendulum_energy", "pendulum_momentum", "momentum_map", "lift",
+           "SphericalPendulum", "integrate_pendulum", "PendulumSolution", "LagrangeParameters",
+           "lagrange_parameters", "ReductionCheck", "check_lagrange_reduction", "__version__"]

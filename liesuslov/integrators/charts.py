@@ -13,8 +13,8 @@ by the inverse: ``Gamma = phi(Theta)^T Gamma0 = phi(-Theta) Gamma0`` for orthogo
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

@@ -1,0 +1,238 @@
+"""The RKMK integrators: fitted orders, exact structure, batches, t_eval, failures, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import liesuslov as ls
+from liesuslov.integrators import METHODS
+from liesuslov.integrators.tableaux import get_tableau
+
+ORDERS = {"lie-euler": 1, "rkmk2": 2, "rkmk-heun": 2, "rkmk3": 3, "rkmk4": 4, "rkmk5": 5, "rkmk8": 8}
+
+
+def kt_scene(n: int):
+    """Klebsh–Tisserand body with Fedorov–Kozlov constraints: the O(n) symmetric form."""
+    I = np.linspace(1.0, 2.0, n)
+    B = np.linspace(3.0, 1.0, n)
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag(I)), potential=ls.QuadraticPotential(B))
+    u = 0.4 * np.cos(np.arange(1, n))
+    Omega0 = np.zeros((n, n))
+    Omega0[: n - 1, n - 1] = u
+    Omega0[n - 1, : n - 1] = -u
+    Gamma0 = np.linspace(0.3, 1.0, n)
+    return system, Omega0, Gamma0 / np.linalg.norm(Gamma0)
+
+
+def general_scene(n: int = 4):
+    """A non-diagonal mass tensor: the general reduced form with the quadratic term."""
+    rng = np.random.default_rng(1)
+    Q = np.linalg.qr(rng.normal(size=(n, n)))[0]
+    I = Q @ np.diag(np.linspace(1.0, 2.5, n)) @ Q.T
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(I), potential=ls.LinearPotential(np.arange(1.0, n + 1)))
+    D = system.constraints
+    omega0 = D.from_coordinates(0.5 * np.ones(D.dim))
+    Gamma0 = np.ones(n) / np.sqrt(n)
+    return system, omega0, Gamma0
+
+
+def end_state(sol):
+    return np.concatenate([sol.omega[-1].ravel(), sol.g[-1].ravel()])
+
+
+@pytest.mark.parametrize("chart", ["exp", "cayley"])
+@pytest.mark.parametrize("method", list(ORDERS))
+def test_fitted_order_with_reconstruction(method, chart):
+    system, Omega0, Gamma0 = general_scene(4)
+    T = 1.0
+    ref = ls.integrate(system, Omega0, (0.0, T), Gamma0=Gamma0, reconstruct=True, method="rkmk8",
+                       chart=chart, h=T / 256)
+    p = ORDERS[method]
+    ks = {1: (5, 9), 2: (4, 8), 3: (3, 7), 4: (3, 7), 5: (2, 6), 8: (1, 4)}[p]
+    hs, errs = [], []
+    for k in range(*ks):
+        h = T / 2**k
+        sol = ls.integrate(system, Omega0, (0.0, T), Gamma0=Gamma0, reconstruct=True, method=method,
+                           chart=chart, h=h)
+        hs.append(h)
+        errs.append(np.max(np.abs(end_state(sol) - end_state(ref))))
+    errs = np.array(errs)
+    keep = errs > 1e-12  # stop at the round-off floor
+    slope = np.polyfit(np.log(np.array(hs)[keep]), np.log(errs[keep]), 1)[0]
+    assert abs(slope - p) <= 0.3, (method, chart, slope, errs)
+
+
+@pytest.mark.parametrize("method", ["lie-euler", "rkmk2", "rkmk4", "rkmk5", "rkmk8"])
+def test_abelian_so2_equals_classical_rk(method):
+    """On so(2) (abelian) RKMK with a tableau is the classical RK method with that tableau."""
+    B = 2.0
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 1.5])),
+                             potential=ls.LinearPotential([0.0, B]))
+    theta0, xi0, h, N = 0.3, 0.7, 0.1, 20
+    Gamma0 = np.array([np.cos(theta0), np.sin(theta0)])
+    sol = ls.integrate(system, [xi0], (0.0, N * h), Gamma0=Gamma0, method=method, h=h)
+    model = system.model(gamma=True)
+
+    def f(y):
+        xi, th = y
+        Gam = np.array([[np.cos(th), np.sin(th)]])
+        return np.array([model.xi_dot(np.array([[xi]]), Gam)[0, 0], xi])
+
+    tab = get_tableau(METHODS[method].tableau)
+    y = np.array([xi0, theta0])
+    for _ in range(N):
+        K = []
+        for i in range(len(tab.c)):
+            K.append(f(y + h * sum(tab.A[i, j] * K[j] for j in range(i))))
+        y = y + h * sum(bj * Kj for bj, Kj in zip(tab.b, K, strict=True))
+    assert abs(sol.xi[-1, 0] - y[0]) < 1e-13
+    assert np.allclose(sol.Gamma[-1], [np.cos(y[1]), np.sin(y[1])], atol=1e-13, rtol=0)
+
+
+def test_structure_exact_after_1e5_steps():
+    system, Omega0, Gamma0 = kt_scene(3)
+    sol = ls.integrate(system, Omega0, (0.0, 1000.0), Gamma0=Gamma0, reconstruct=True, method="rkmk4",
+                       h=0.01, t_eval=[1000.0])
+    assert sol.stats["steps"] == 100_000
+    g = sol.g[-1]
+    assert np.max(np.abs(g.T @ g - np.eye(3))) < 1e-12
+    assert abs(np.linalg.det(g) - 1) < 1e-12
+    assert abs(np.linalg.norm(sol.Gamma[-1]) - 1) < 1e-13
+    assert np.max(np.abs(system.constraints.complement().coordinates(sol.omega))) == 0.0
+    E = system.energy(sol.Omega, sol.Gamma)
+    E0 = system.energy(Omega0, Gamma0)
+    assert np.max(np.abs(E - E0)) < 1e-7
+
+
+def test_gamma_read_off_g_equals_gamma_moved_by_action():
+    system, Omega0, Gamma0 = kt_scene(4)
+    a = ls.integrate(system, Omega0, (0.0, 3.0), Gamma0=Gamma0, reconstruct=True, h=0.01)
+    b = ls.integrate(system, Omega0, (0.0, 3.0), Gamma0=Gamma0, reconstruct=False, h=0.01)
+    assert np.allclose(a.Gamma, b.Gamma, atol=1e-12, rtol=0)
+    gamma = a.g @ a.Gamma[..., None]  # gamma = g Gamma is one constant vector
+    assert np.max(np.abs(gamma - gamma[0])) < 1e-13
+
+
+@pytest.mark.parametrize("method,kw", [("rkmk4", {"h": 0.05}), ("rkmk45", {"rtol": 1e-8, "atol": 1e-10})])
+def test_batch_equals_loop(method, kw):
+    system, Omega0, Gamma0 = kt_scene(4)
+    rng = np.random.default_rng(3)
+    Om = np.repeat(Omega0[None], 5, axis=0) * rng.uniform(0.5, 1.5, size=(5, 1, 1))
+    Om = Om.reshape(5, 1, 4, 4)
+    G = rng.normal(size=(1, 2, 4))
+    G /= np.linalg.norm(G, axis=-1, keepdims=True)
+    te = np.linspace(0, 2, 5)
+    sol = ls.integrate(system, Om, (0.0, 2.0), Gamma0=G, reconstruct=True, method=method, t_eval=te, **kw)
+    assert sol.Gamma.shape == (5, 5, 2, 4) and sol.g.shape == (5, 5, 2, 4, 4)
+    for i in range(5):
+        for j in range(2):
+            one = ls.integrate(system, Om[i, 0], (0.0, 2.0), Gamma0=G[0, j], reconstruct=True,
+                               method=method, t_eval=te, **kw)
+            tol = 1e-14 if method == "rkmk4" else 1e-7  # adaptive: shared steps differ from single runs
+            assert np.allclose(one.Gamma, sol.Gamma[:, i, j], atol=tol, rtol=0)
+            assert np.allclose(one.omega, sol.omega[:, i, j], atol=tol, rtol=0)
+
+
+def test_adaptive_error_falls_with_tolerance():
+    system, Omega0, Gamma0 = general_scene(4)
+    ref = ls.integrate(system, Omega0, (0.0, 5.0), Gamma0=Gamma0, reconstruct=True, method="rkmk8", h=1 / 200)
+    for method in ("rkmk23", "rkmk45", "rkmk853"):
+        errs = []
+        for rtol in (1e-4, 1e-7, 1e-10):
+            sol = ls.integrate(system, Omega0, (0.0, 5.0), Gamma0=Gamma0, reconstruct=True, method=method,
+                               rtol=rtol, atol=rtol * 1e-2, t_eval=[5.0])
+            assert sol.success
+            errs.append(np.max(np.abs(end_state(sol) - end_state(ref))))
+        assert errs[0] > errs[1] > errs[2] or errs[2] < 1e-11, (method, errs)
+        assert errs[2] < 1e-7, (method, errs)
+
+
+def test_t_eval_hit_exactly_and_backward_integration():
+    system, Omega0, Gamma0 = kt_scene(4)
+    te = np.array([0.0, 0.3, 1.1, 2.0])
+    for method, kw in (("rkmk4", {"h": 0.07}), ("rkmk45", {})):
+        fwd = ls.integrate(system, Omega0, (0.0, 2.0), Gamma0=Gamma0, reconstruct=True, method=method,
+                           t_eval=te, **kw)
+        assert np.array_equal(fwd.t, te)
+        back = ls.integrate(system, fwd.Omega[-1], (2.0, 0.0), Gamma0=fwd.Gamma[-1], g0=fwd.g[-1],
+                            reconstruct=True, method=method, t_eval=te[::-1], **kw)
+        assert np.array_equal(back.t, te[::-1])
+        assert np.allclose(back.omega[-1], fwd.omega[0], atol=1e-6)
+        assert np.allclose(back.g[-1], np.eye(4), atol=1e-6)
+
+
+def test_save_load_round_trip(tmp_path):
+    system, Omega0, Gamma0 = kt_scene(4)
+    sol = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, reconstruct=True, h=0.1)
+    path = sol.save(tmp_path / "run.npz")
+    back = ls.Solution.load(path)
+    for name in ("t", "xi", "omega", "Gamma", "g"):
+        assert np.array_equal(getattr(back, name), getattr(sol, name))
+    assert back.stats["nfev"] == sol.stats["nfev"] and back.success
+
+
+def test_model_only_what_the_scene_needs():
+    system, Omega0, Gamma0 = kt_scene(4)
+    sol = ls.integrate(system, Omega0, (0.0, 0.5), Gamma0=Gamma0, h=0.1)
+    assert sol.stats["form"] == "symmetric" and sol.stats["state_dim"] == 3 + 4 and sol.g is None
+    free = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])))
+    sol = ls.integrate(free, [0.0, 0.3, 0.4], (0.0, 1.0), h=0.1)
+    assert sol.Gamma is None and sol.g is None and sol.stats["state_dim"] == 2
+    assert sol.stats["nfev"] == 4 * 10
+    assert np.allclose(sol.omega, sol.omega[0])  # D is J-invariant and V = 0: Omega is constant
+
+
+def test_failure_reports_time():
+    def V(G):
+        return np.where(G[..., 0] > 0.9, np.nan, G[..., 0])
+
+    def grad(G):
+        out = np.zeros_like(G)
+        out[..., 0] = np.where(G[..., 0] > 0.9, np.nan, 1.0)
+        return out
+
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])), potential=ls.Potential(V, grad))
+    Gamma0 = np.array([0.0, 0.0, 1.0])
+    sol = ls.integrate(system, [0.0, 2.0, 0.0], (0.0, 10.0), Gamma0=Gamma0, h=0.01)
+    assert not sol.success and "non-finite" in sol.message and "t = " in sol.message
+    assert np.all(np.isfinite(sol.omega))
+    sol = ls.integrate(system, [0.0, 2.0, 0.0], (0.0, 10.0), Gamma0=Gamma0, method="rkmk45")
+    assert not sol.success and "t = " in sol.message
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"method": "rk4"}, "method"),
+    ({"chart": "log"}, "chart"),
+    ({"method": "rkmk4"}, "h"),
+    ({"method": "rkmk4", "h": -0.1}, "h"),
+    ({"method": "rkmk45", "rtol": 0.0}, "rtol"),
+    ({"Gamma0": np.array([1.0, 1.0, 0.0, 0.0]), "h": 0.1}, "Gamma0"),
+    ({"Gamma0": np.array([np.nan, 0, 0, 1.0]), "h": 0.1}, "Gamma0"),
+    ({"Gamma0": np.ones(3) / np.sqrt(3), "h": 0.1}, "Gamma0"),
+    ({"Gamma0": None, "h": 0.1}, "Gamma0"),
+    ({"h": 0.1, "t_eval": [0.5, 0.2]}, "t_eval"),
+    ({"h": 0.1, "t_eval": [3.0]}, "t_eval"),
+    ({"h": 0.1, "g0": np.ones((4, 4)), "reconstruct": True}, "g0"),
+])
+def test_bad_input(kwargs, match):
+    system, Omega0, Gamma0 = kt_scene(4)
+    kw = {"Gamma0": Gamma0, **kwargs}
+    with pytest.raises(ValueError, match=match):
+        ls.integrate(system, Omega0, (0.0, 1.0), **kw)
+
+
+def test_bad_omega_and_span():
+    system, Omega0, Gamma0 = kt_scene(4)
+    bad = Omega0.copy()
+    bad[0, 1], bad[1, 0] = 0.1, -0.1
+    with pytest.raises(ValueError, match="Omega0"):
+        ls.integrate(system, bad, (0.0, 1.0), Gamma0=Gamma0, h=0.1)
+    with pytest.raises(ValueError, match="Omega0"):
+        ls.integrate(system, np.ones((4, 4)), (0.0, 1.0), Gamma0=Gamma0, h=0.1)
+    with pytest.raises(ValueError, match="Omega0"):
+        ls.integrate(system, np.ones(5), (0.0, 1.0), Gamma0=Gamma0, h=0.1)
+    with pytest.raises(ValueError, match="t_span"):
+        ls.integrate(system, Omega0, (1.0, 1.0), Gamma0=Gamma0, h=0.1)
+    with pytest.raises(TypeError, match="system"):
+        ls.integrate("not a system", Omega0, (0.0, 1.0), h=0.1)
