@@ -51,6 +51,7 @@ from .reduction import (
                       pendulum_momentum,
                       to_spherical_pendulum,
 )
+from .scene import Scene, load_scene
 
 __version__ = "0.1.0"
 
@@ -61,4 +62,4 @@ __all__ = ["LieAlgebra", "se", "so", "SpecialOrthogonalAlgebra", "wedge", "pairi
            "cases", "integrate", "METHODS", "Solution", "interop", "analytic",
            "to_spherical_pendulum", "pendulum_energy", "pendulum_momentum", "momentum_map", "lift",
            "SphericalPendulum", "integrate_pendulum", "PendulumSolution", "LagrangeParameters",
-           "lagrange_parameters", "ReductionCheck", "check_lagrange_reduction", "__version__"]
+           "lagrange_parameters", "ReductionCheck", "check_lagrange_reduction", "Scene", "load_scene", "__version__"]

@@ -50,13 +50,21 @@ def as_float_array(x: Any, name: str, *, ndim_min: int = 0, tail: tuple[int, ...
     return arr
 
 
-def check_positive(x: float, name: str) -> float:
-    """Return ``x`` as a float after checking it is finite and strictly positive."""
+def check_real(x: Any, name: str) -> float:
+    """Return ``x`` as a float after checking it is a finite real number."""
     try:
         val = float(x)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"{name} must be a real number, got {type(x).__name__}") from exc
-    if not np.isfinite(val) or val <= 0:
+    if not np.isfinite(val):
+        raise ValueError(f"{name} must be finite, got {x!r}")
+    return val
+
+
+def check_positive(x: Any, name: str) -> float:
+    """Return ``x`` as a float after checking it is finite and strictly positive."""
+    val = check_real(x, name)
+    if val <= 0:
         raise ValueError(f"{name} must be a finite positive number, got {x!r}")
     return val
 

@@ -1,131 +1,527 @@
-"""Command line: ``liesuslov run [SCENE.toml]`` (the main job) and friends."""
+"""Command line: ``liesuslov run [SCENE.toml]`` (the main job), ``cases``, ``check`` and ``bench``.
+
+``liesuslov run`` with no file integrates the built-in scene (:data:`liesuslov.scene.DEFAULT_SCENE`,
+the n = 4 Klebsh–Tisserand body reconstructed on SO(4)); ``python -m liesuslov`` is the same program.
+
+Exit status: 0 on success; 1 when the integration fails or ``check`` finds a drift or defect above
+its tolerance; 2 for a user error (a bad scene file, a missing file, a bad option), reported as one
+line on stderr without a traceback (``liesuslov --debug ...`` shows the traceback).
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
+import os
+import shutil
 import sys
+import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-__all__ = ["main", "default_scene"]
+__all__ = ["main", "build_parser", "OUTPUT_FILES"]
+
+#: Every file ``liesuslov run`` may write into its output folder (stale ones from earlier runs are removed).
+OUTPUT_FILES = ("trajectory.npz", "scene.toml", "report.txt", "omega.png", "gamma.png", "path.png", "energy.png")
 
 
-def default_scene():
-    """The built-in scene: the n = 4 Klebsh–Tisserand body on a torus, with reconstruction on SO(4).
+class _UserError(Exception):
+    """A mistake of the user's (exit status 2, one line on stderr)."""
 
-    Returns
-    -------
-    dict with ``system``, ``Omega0``, ``Gamma0``, ``t_span``, ``integrals`` and integration options.
+
+# ====================================================================== entry point
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``liesuslov`` command line; returns the exit status.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments (default ``sys.argv[1:]``), e.g. ``["run", "scene.toml", "--out", "out"]``.
     """
-    from .algebra import Inertia
-    from .mechanics import QuadraticPotential, SuslovSystem
-
-    I = np.array([1.0, 1.5, 2.0, 0.5])
-    B = np.array([4.0, 3.0, 2.5, 1.0])
-    system = SuslovSystem(Inertia.from_mass_tensor(np.diag(I)), potential=QuadraticPotential(B))
-    u = np.array([0.3, -0.2, 0.25])
-    Omega0 = np.zeros((4, 4))
-    Omega0[:3, 3], Omega0[3, :3] = u, -u
-    Gamma0 = np.array([0.3, 0.2, -0.25, 0.0])
-    Gamma0[3] = np.sqrt(1 - np.sum(Gamma0[:3] ** 2))
-
-    def F(omega, Gamma):  # Klebsh–Tisserand integrals F_i = (B_i - B_n) Gamma_i^2 + (I_i + I_n) Omega_in^2
-        Oin = omega[..., [2, 4, 5]]
-        return (B[:3] - B[3]) * Gamma[..., :3] ** 2 + (I[:3] + I[3]) * Oin ** 2
-
-    return {"name": "klebsh-tisserand n=4", "system": system, "Omega0": Omega0, "Gamma0": Gamma0,
-            "t_span": (0.0, 50.0), "reconstruct": True, "method": "rkmk853", "chart": "exp",
-            "rtol": 1e-10, "atol": 1e-12, "integrals": {"F_i (Klebsh-Tisserand)": F}}
-
-
-def _run(args) -> int:
-    from .integrators import integrate
-
-    scene = default_scene() if args.scene is None else _load_scene(args.scene)
-    out = Path(args.out)
-    system = scene["system"]
-    kw = {k: scene[k] for k in ("reconstruct", "method", "chart", "rtol", "atol", "h") if k in scene}
-    t_span = scene["t_span"]
-    t_eval = np.linspace(t_span[0], t_span[1], args.samples)
-    start = time.perf_counter()
-    sol = integrate(system, scene["Omega0"], t_span, Gamma0=scene.get("Gamma0"), t_eval=t_eval,
-                    progress=args.progress, **kw)
-    wall = time.perf_counter() - start
-    model = system.model(gamma=scene.get("Gamma0") is not None)
-    print(f"scene: {scene['name']}")
-    print(f"model: {model.description()}")
-    print(f"method: {sol.stats['method']} ({sol.stats['chart']} chart), steps {sol.stats['steps']}, "
-          f"rejected {sol.stats['rejected']}, nfev {sol.stats['nfev']}, time {wall:.3f} s")
-    if not sol.success:
-        print(f"FAILED: {sol.message}")
-    E = system.energy(sol.omega, sol.Gamma)
-    print(f"energy drift max |E - E0| = {np.max(np.abs(E - E[0])):.3e}")
-    for name, F in scene.get("integrals", {}).items():
-        vals = F(sol.omega, sol.Gamma)
-        print(f"integral {name}: max drift {np.max(np.abs(vals - vals[0])):.3e}")
-    D = system.constraints
-    print(f"constraint defect max |pr_D-perp Omega| = {np.max(np.abs(D.complement().coordinates(sol.omega))):.3e}")
-    if sol.Gamma is not None:
-        print(f"sphere defect max ||Gamma| - 1| = {np.max(np.abs(np.linalg.norm(sol.Gamma, axis=-1) - 1)):.3e}")
-    if sol.g is not None:
-        m = sol.g.shape[-1]
-        orth = np.max(np.abs(np.swapaxes(sol.g, -1, -2) @ sol.g - np.eye(m)))
-        print(f"orthogonality defect max |g^T g - I| = {orth:.3e}")
-    out.mkdir(parents=True, exist_ok=True)
-    path = sol.save(out / "trajectory.npz")
-    print(f"wrote {path}")
-    fig = _figure(sol, out / "trajectory.png", scene["name"])
-    if fig:
-        print(f"wrote {fig}")
-    return 0 if sol.success else 1
-
-
-def _figure(sol, path: Path, title: str):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(argv)
     try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("(matplotlib not installed: no figure; pip install 'liesuslov[plot]')")
-        return None
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    axes[0].plot(sol.t, sol.xi)
-    axes[0].set_xlabel("t")
-    axes[0].set_ylabel(r"$\xi$ (reduced coordinates of $\Omega$)")
-    if sol.Gamma is not None:
-        axes[1].plot(sol.t, sol.Gamma)
-        axes[1].set_ylabel(r"$\Gamma$")
-    axes[1].set_xlabel("t")
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
-
-
-def _load_scene(path):
-    from .scene import load_scene
-
-    return load_scene(path)
-
-
-def main(argv=None) -> int:
-    """Entry point of the ``liesuslov`` console script."""
-    parser = argparse.ArgumentParser(prog="liesuslov", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="integrate a scene (default: the built-in n = 4 Klebsh–Tisserand body)")
-    run.add_argument("scene", nargs="?", default=None, help="a scene TOML file")
-    run.add_argument("--out", default="liesuslov-out", help="output folder (default: liesuslov-out)")
-    run.add_argument("--samples", type=int, default=501, help="number of output times")
-    run.add_argument("--progress", action="store_true", help="show a progress bar")
-    args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
+        if extra and not getattr(args, "accept_extra", False):
+            parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    except SystemExit as exc:  # --help, or a usage error already printed by argparse
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     try:
-        if args.command == "run":
-            return _run(args)
-    except (ValueError, TypeError, FileNotFoundError) as exc:
+        return int(args.func(args))
+    except (_UserError, ValueError, TypeError, OSError) as exc:
+        if getattr(args, "debug", False):
+            raise
         print(f"liesuslov: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("liesuslov: interrupted (nothing written)", file=sys.stderr)
+        return 130
+
+
+def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
+    """The argument parser; ``liesuslov.bench`` is imported only when ``argv`` asks for ``bench``."""
+    from . import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="liesuslov",
+        description="Nonholonomic rigid-body dynamics on Lie groups: integrate scenes, list the integrable "
+                    "cases, check integrals and structure, benchmark.",
+        epilog="Run `liesuslov run` for the built-in scene; `liesuslov COMMAND --help` for a command.")
+    parser.add_argument("--version", action="version", version=f"liesuslov {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = sub.add_parser("run", help="integrate a scene (default: the built-in n = 4 Klebsh–Tisserand body)",
+                         description="Integrate a scene file (or the built-in scene), print what was modelled, "
+                                     "the drift of the integrals and the structure defects, and write the "
+                                     "trajectory (.npz), the scene, a report and figures to the output folder.")
+    run.add_argument("scene", nargs="?", default=None, help="a scene TOML file (default: the built-in scene)")
+    run.add_argument("--out", metavar="DIR", default=None,
+                     help="output folder (default: the scene's [output].dir, else liesuslov-out)")
+    run.add_argument("--no-figures", action="store_true", help="do not draw figures")
+    run.add_argument("--progress", action="store_true", help="show a progress bar (needs tqdm)")
+    run.add_argument("--t-end", type=float, metavar="T", default=None, help="integrate up to t = T instead")
+    run.add_argument("--backend", default=None, metavar="NAME",
+                     help="integrate(backend=...): auto, numpy or numba (default: the scene's, else auto)")
+    run.add_argument("--print-default", action="store_true",
+                     help="print the built-in scene as TOML (a template for your own) and exit")
+    run.set_defaults(func=_cmd_run)
+
+    cases = sub.add_parser("cases", help="list the named integrable cases (parameters, first integrals)",
+                           description="The named cases of ls.CASES with their example parameters and first "
+                                       "integrals; with NAME, one case and a scene template for it.")
+    cases.add_argument("name", nargs="?", default=None, help="one case: details and a scene template")
+    cases.set_defaults(func=_cmd_cases)
+
+    check = sub.add_parser("check", help="integrate a scene and check integrals, structure, reduction",
+                           description="Integrate a scene and check the drift of its first integrals, the "
+                                       "structure defects and, for the Lagrange case, the reduction to the "
+                                       "spherical pendulum. Exit status 0 when all are within the tolerance, "
+                                       "1 otherwise. Writes nothing.")
+    check.add_argument("scene", nargs="?", default=None, help="a scene TOML file (default: the built-in scene)")
+    check.add_argument("--tol", type=float, default=None,
+                       help="tolerance (default: the scene's [check].tol, else 1e-8); drifts of integrals are "
+                            "compared with tol * max(1, |F(0)|)")
+    check.add_argument("--t-end", type=float, metavar="T", default=None, help="integrate up to t = T instead")
+    check.add_argument("--progress", action="store_true", help="show a progress bar (needs tqdm)")
+    check.add_argument("--backend", default=None, metavar="NAME",
+                       help="integrate(backend=...): auto, numpy or numba (default: the scene's, else auto)")
+    check.set_defaults(func=_cmd_check)
+
+    bench = sub.add_parser("bench", help="work-precision benchmarks (liesuslov.bench)",
+                           description="Work-precision benchmarks against scipy (see liesuslov.bench).")
+    if _wants_bench(argv):
+        try:
+            bench_module = importlib.import_module(".bench", __package__)
+        except Exception as exc:  # noqa: BLE001 - any failure to import is reported on use only
+            bench.set_defaults(func=_bench_unavailable(exc), accept_extra=True)  # its options are unknown
+        else:
+            bench_module.add_arguments(bench)
+            bench.set_defaults(func=bench_module.run_from_args)
+    return parser
+
+
+def _wants_bench(argv: Sequence[str]) -> bool:
+    """True iff the command (the first argument that is not an option) is ``bench``."""
+    for a in argv:
+        if not a.startswith("-"):
+            return a == "bench"
+    return False
+
+
+def _bench_unavailable(exc: BaseException):
+    def report(args) -> int:
+        raise _UserError(f"the bench command is unavailable: liesuslov.bench could not be imported "
+                         f"({type(exc).__name__}: {exc})")
+    return report
+
+
+# ====================================================================== run
+def _cmd_run(args) -> int:
+    from .scene import DEFAULT_SCENE
+
+    if args.print_default:
+        if args.scene is not None:
+            raise _UserError("--print-default prints the built-in scene; it takes no scene file")
+        sys.stdout.write(DEFAULT_SCENE)
+        return 0
+    scene = _load(args.scene, t_end=args.t_end, progress=args.progress or None, backend=args.backend,
+                  out_dir=args.out, figures=False if args.no_figures else None)
+    out = Path(scene.out_dir)
+    _print_header(scene)
+    sol, wall = _integrate(scene)
+    if not sol.success:
+        print(f"liesuslov: error: the integration failed: {sol.message} (nothing written)", file=sys.stderr)
+        return 1
+    lines, _ = _report(scene, sol, wall, tol=None)
+    for line in lines:
+        print(line)
+    written = _write_outputs(scene, sol, lines, out)
+    print(f"wrote {out}{os.sep}: {', '.join(written)}")
     return 0
+
+
+def _load(path: str | None, **overrides: Any):
+    from .scene import default_scene, load_scene
+
+    scene = default_scene() if path is None else load_scene(path)
+    opts = {k: v for k, v in overrides.items() if v is not None}
+    return scene.with_options(**opts) if opts else scene
+
+
+def _print_header(scene) -> None:
+    origin = "built-in default; `liesuslov run --print-default` shows it" if scene.source == "<default scene>" \
+        else scene.source
+    print(f"scene: {scene.name}  ({origin})")
+    if scene.description:
+        print(f"  {scene.description}")
+    if scene.case is not None:
+        print(f"case: {scene.case.name}: {scene.case.description}")
+    system = scene.system
+    print(f"system: {system!r}")
+    model = scene.model()
+    print(f"model: {model.description()}")
+    if scene.reconstruct:
+        m = system.n
+        print(f"state: {model.state_dim} + g ({m}x{m}) = {model.state_dim + m * m} numbers per trajectory")
+    else:
+        print(f"state: {model.state_dim} numbers per trajectory")
+    if scene.backend != "numpy" and importlib.util.find_spec("numba") is not None:
+        print("(backend: the compiled kernel if the model qualifies; the first compiled run on a machine "
+              "compiles it, 20-60 s, once)")
+
+
+def _integrate(scene):
+    start = time.perf_counter()
+    with np.errstate(over="ignore", invalid="ignore"):  # a blow-up ends the run with a failed status instead
+        sol = scene.run()
+    return sol, time.perf_counter() - start
+
+
+# ====================================================================== diagnostics
+def _diagnostics(scene, sol) -> tuple[list[tuple[str, float, float]], list[tuple[str, float]]]:
+    """``([(integral name, F(0), max |F - F(0)|)], [(defect label, value)])`` along the solution."""
+    x, G = sol.omega, sol.Gamma
+    integrals = []
+    for name, F in scene.integrals.items():
+        vals = np.asarray(F(x, G), dtype=float)
+        integrals.append((name, float(vals[0]), float(np.max(np.abs(vals - vals[0])))))
+    defects = []
+    D = scene.system.constraints
+    if D.dim < scene.system.algebra.dim:
+        defects.append(("constraints  max |<a^i, Omega>|", float(np.max(np.abs(x @ D.covectors.T)))))
+    if G is not None:
+        defects.append(("sphere       max ||Gamma| - 1|", float(np.max(np.abs(np.linalg.norm(G, axis=-1) - 1)))))
+    if sol.g is not None:
+        name = scene.system.algebra.name
+        g = sol.g
+        if name.startswith("so("):
+            m = g.shape[-1]
+            err = np.max(np.abs(np.swapaxes(g, -1, -2) @ g - np.eye(m)))
+            defects.append(("group        max |g^T g - I|", float(err)))
+        elif name in ("se(2)", "se(3)"):
+            R = g[..., :-1, :-1]
+            k = R.shape[-1]
+            err = np.max(np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(k)))
+            last = np.zeros(k + 1)
+            last[-1] = 1.0
+            err = max(float(err), float(np.max(np.abs(g[..., -1, :] - last))))
+            defects.append(("group        max |R^T R - I|, last row", err))
+    return integrals, defects
+
+
+def _report(scene, sol, wall: float, tol: float | None) -> tuple[list[str], list[str]]:
+    """The report lines and, when ``tol`` is given, the failures (one sentence each)."""
+    st = sol.stats
+    chart = f", {st['chart']} chart" if st.get("chart") else ""
+    t0, t1 = scene.t_span
+    backend = f", {st['backend']} backend" if st.get("backend") else ""
+    lines = [f"integration: {st['method']}{chart}, {st['form']} form{backend}, t from {t0:g} to {t1:g}: "
+             f"{st['steps']} steps, {st['rejected']} rejected, {st['nfev']} field evaluations, "
+             f"{len(sol.t)} output times, {wall:.3f} s"]
+    integrals, defects = _diagnostics(scene, sol)
+    failures: list[str] = []
+    width = max(len(n) for n, _, _ in integrals)
+    lines.append("first integrals, max |F(t) - F(0)|:")
+    for name, F0, drift in integrals:
+        verdict = ""
+        if tol is not None:
+            bound = tol * max(1.0, abs(F0))
+            ok = np.isfinite(drift) and drift <= bound
+            verdict = "  ok" if ok else f"  FAIL (> {bound:.1e})"
+            if not ok:
+                failures.append(f"the drift of {name} is {drift:.3e} > {bound:.1e}")
+        lines.append(f"  {name:<{width}}  F(0) = {F0: .10e}   drift {drift:.3e}{verdict}")
+    if defects:
+        lines.append("structure defects:")
+        for label, val in defects:
+            verdict = ""
+            if tol is not None:
+                ok = np.isfinite(val) and val <= tol
+                verdict = "  ok" if ok else f"  FAIL (> {tol:.1e})"
+                if not ok:
+                    failures.append(f"{' '.join(label.split()[:1])} defect {val:.3e} > {tol:.1e}")
+            lines.append(f"  {label:<38} {val:.3e}{verdict}")
+    return lines, failures
+
+
+# ====================================================================== output
+def _write_outputs(scene, sol, lines: list[str], out: Path) -> list[str]:
+    """Write everything into a temporary folder inside ``out``, then move the files in place.
+
+    Nothing is half-written: a failure before the final renames leaves ``out`` as it was (and removes
+    it if this call created it).
+    """
+    created = not out.exists()
+    if out.exists() and not out.is_dir():
+        raise _UserError(f"the output folder {out} exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".liesuslov-", dir=out))
+    try:
+        sol.save(tmp / "trajectory.npz")
+        (tmp / "scene.toml").write_text(scene.to_toml(), encoding="utf-8")
+        names = ["trajectory.npz", "scene.toml"]
+        if scene.figures:
+            figs = _figures(scene, sol, tmp)
+            if figs is None:
+                lines.append("(no figures: matplotlib is not installed; pip install 'liesuslov[plot]')")
+                print(lines[-1])
+            else:
+                names += figs
+        (tmp / "report.txt").write_text("\n".join(lines) + "\n", encoding="utf-8")
+        names.insert(2, "report.txt")
+        for stale in OUTPUT_FILES:
+            if stale not in names and (out / stale).is_file():
+                (out / stale).unlink()
+        for name in names:
+            os.replace(tmp / name, out / name)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if created:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    shutil.rmtree(tmp, ignore_errors=True)
+    return names
+
+
+def _labels(system) -> list[str]:
+    alg = system.algebra
+    if alg.name.startswith("so("):
+        n = alg.n
+        return [f"$\\Omega_{{{i + 1}{j + 1}}}$" for i in range(n) for j in range(i + 1, n)]
+    if alg.name == "se(2)":
+        return [r"$\omega$", "$v_x$", "$v_y$"]
+    if alg.name == "se(3)":
+        return [r"$\omega_1$", r"$\omega_2$", r"$\omega_3$", "$v_1$", "$v_2$", "$v_3$"]
+    return [f"$x_{{{k + 1}}}$" for k in range(alg.dim)]
+
+
+def _figures(scene, sol, folder: Path) -> list[str] | None:
+    """Draw omega(t), Gamma (or the path on se(n)) and the drift of the integrals; None without matplotlib."""
+    try:
+        from matplotlib.figure import Figure
+    except ImportError:
+        return None
+    names = []
+    t, x = sol.t, sol.omega
+    title = scene.name
+
+    fig = Figure(figsize=(8, 4.5), layout="constrained")
+    ax = fig.add_subplot()
+    labels = _labels(scene.system)
+    for k in range(x.shape[-1]):
+        if np.any(x[:, k] != 0):
+            ax.plot(t, x[:, k], label=labels[k], lw=1.2)
+    ax.set_xlabel("t")
+    ax.set_ylabel(r"components of $\Omega$")
+    ax.set_title(f"{title}: angular velocity")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    fig.savefig(folder / "omega.png", dpi=110)
+    names.append("omega.png")
+
+    if sol.Gamma is not None:
+        G = sol.Gamma
+        n = G.shape[-1]
+        pairs = [(0, 1), (n - 2, n - 1)] if n > 2 else [(0, 1)]
+        fig = Figure(figsize=(4.2 * len(pairs), 4.4), layout="constrained")
+        s = np.linspace(0, 2 * np.pi, 200)
+        for k, (i, j) in enumerate(pairs):
+            ax = fig.add_subplot(1, len(pairs), k + 1)
+            ax.plot(np.cos(s), np.sin(s), color="0.8", lw=0.8)
+            ax.plot(G[:, i], G[:, j], lw=0.9)
+            ax.plot(G[0, i], G[0, j], "o", color="C3", ms=4, label="t = t0")
+            ax.set_xlabel(f"$\\Gamma_{i + 1}$")
+            ax.set_ylabel(f"$\\Gamma_{j + 1}$")
+            ax.set_aspect("equal")
+            ax.legend(loc="upper right", fontsize="small")
+        fig.suptitle(f"{title}: $\\Gamma$ on $S^{{{n - 1}}}$, projections")
+        fig.savefig(folder / "gamma.png", dpi=110)
+        names.append("gamma.png")
+    elif sol.g is not None and scene.system.algebra.name in ("se(2)", "se(3)"):
+        p = sol.g[:, :-1, -1]
+        fig = Figure(figsize=(5, 5), layout="constrained")
+        ax = fig.add_subplot()
+        ax.plot(p[:, 0], p[:, 1], lw=1.2)
+        ax.plot(p[0, 0], p[0, 1], "o", color="C3", ms=4, label="t = t0")
+        ax.set_xlabel("x")
+        ax.set_ylabel("y")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.legend(loc="best", fontsize="small")
+        ax.set_title(f"{title}: path of the body's origin")
+        fig.savefig(folder / "path.png", dpi=110)
+        names.append("path.png")
+
+    fig = Figure(figsize=(8, 4.5), layout="constrained")
+    ax = fig.add_subplot()
+    floor = 1e-18  # log scale: exact zeros are drawn at the floor
+    for name, F in scene.integrals.items():
+        vals = np.asarray(F(x, sol.Gamma), dtype=float)
+        ax.semilogy(t, np.maximum(np.abs(vals - vals[0]), floor), label=name, lw=1.0)
+    ax.set_xlabel("t")
+    ax.set_ylabel(r"$|F(t) - F(0)|$")
+    ax.set_title(f"{title}: energy error and drift of the first integrals")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    fig.savefig(folder / "energy.png", dpi=110)
+    names.append("energy.png")
+    return names
+
+
+# ====================================================================== check
+def _cmd_check(args) -> int:
+    scene = _load(args.scene, t_end=args.t_end, progress=args.progress or None, backend=args.backend)
+    tol = scene.tol if args.tol is None else args.tol
+    if not (np.isfinite(tol) and tol > 0):
+        raise _UserError(f"--tol must be a positive number, got {args.tol!r}")
+    _print_header(scene)
+    sol, wall = _integrate(scene)
+    if not sol.success:
+        print(f"liesuslov: error: the integration failed: {sol.message}", file=sys.stderr)
+        return 1
+    lines, failures = _report(scene, sol, wall, tol=tol)
+    for line in lines:
+        print(line)
+    failures += _check_reduction(scene, tol)
+    if failures:
+        print(f"check FAILED (tol = {tol:g}): " + "; ".join(failures))
+        return 1
+    print(f"check passed: every drift and defect is within tol = {tol:g}")
+    return 0
+
+
+def _check_reduction(scene, tol: float) -> list[str]:
+    """The Lagrange reduction report when the scene is the Lagrange case; the failures."""
+    from .reduction import check_lagrange_reduction, lagrange_parameters
+
+    try:
+        lagrange_parameters(scene.system)
+    except (ValueError, TypeError):
+        return []
+    import inspect
+
+    extra = {}
+    if scene.backend is not None and "backend" in inspect.signature(check_lagrange_reduction).parameters:
+        extra["backend"] = scene.backend
+    try:
+        r = check_lagrange_reduction(scene.system, scene.omega0, scene.Gamma0, scene.t_span, g0=scene.g0,
+                                     method=scene.method, rtol=scene.rtol, atol=scene.atol,
+                                     t_eval=scene.output_times(), h=scene.h, chart=scene.chart, **extra)
+    except RuntimeError as exc:
+        print(f"Lagrange reduction check: {exc}")
+        return [f"the Lagrange reduction check could not run: {exc}"]
+    print(r)
+    if r.ok(tol):
+        print(f"  reduction consistent within tol = {tol:g}")
+        return []
+    return [f"the Lagrange reduction differs from the spherical pendulum by more than {tol:g}"]
+
+
+# ====================================================================== cases
+def _fmt(v: Any) -> str:
+    from .mechanics.potentials import Potential
+
+    if isinstance(v, Potential):
+        return repr(v)
+    if callable(v):
+        return f"<function {getattr(v, '__name__', '?')}>"
+    if isinstance(v, (list, tuple, np.ndarray)):
+        from .scene import _fmt_list
+
+        return _fmt_list(v)
+    if isinstance(v, float):
+        return f"{v:g}"
+    return repr(v)
+
+
+def _cmd_cases(args) -> int:
+    from .mechanics import CASES
+
+    if args.name is not None:
+        if args.name not in CASES:
+            raise _UserError(f"unknown case {args.name!r}; the named cases are: {', '.join(CASES)}")
+        _print_case(CASES[args.name])
+        return 0
+    print("Named cases (ls.CASES). In a scene file: [case] name = \"...\" and [case.parameters]; "
+          "`liesuslov cases NAME` prints a template.\n")
+    for name, entry in CASES.items():
+        case = entry.build()
+        print(f"{name}: {entry.description}")
+        params = ", ".join(f"{k} = {_fmt(v)}" for k, v in entry.example.items())
+        print(f"    parameters  {params}")
+        print(f"    integrals   {', '.join(case.integrals)}")
+        sysm = case.system
+        print(f"    body        {sysm.algebra.name}, dim D = {sysm.constraints.dim}, "
+              f"Gamma {'in the state' if sysm.needs_gamma else 'not needed (V = 0)'}")
+        print()
+    return 0
+
+
+def _print_case(entry) -> None:
+    import inspect
+
+    from .scene import to_toml
+
+    case = entry.build()
+    doc = inspect.getdoc(entry.constructor) or ""
+    print(f"{entry.name}: {entry.description}\n")
+    print(doc)
+    print(f"\nfirst integrals: {', '.join(case.integrals)}")
+    print(f"model: {case.system.model().description()}\n")
+    params: dict[str, Any] = {}
+    skipped = []
+    for k, v in entry.example.items():
+        if k in ("v1", "dv1", "v2", "dv2"):
+            skipped.append(k)
+        elif k == "potential":
+            params[k] = _potential_table(v)
+        else:
+            params[k] = np.asarray(v).tolist() if isinstance(v, (list, tuple, np.ndarray)) else v
+    omega, Gamma = case.random_state(rng=0, scale=1.0)
+    D = case.system.constraints
+    initial: dict[str, Any] = {"xi": [round(float(v), 3) for v in D.coordinates(omega)]}
+    if Gamma is not None:
+        G = np.round(Gamma, 3)
+        initial["Gamma"] = (G / np.linalg.norm(G)).tolist()
+    doc_toml = {"case": {"name": entry.name, "parameters": params}, "initial": initial,
+                "integrate": {"t_span": [0.0, 10.0], "method": "rkmk45", "rtol": 1e-10, "atol": 1e-12,
+                              "n_out": 501, "backend": "numpy"},
+                "output": {"name": entry.name, "dir": f"liesuslov-out/{entry.name}", "figures": True}}
+    print("# a scene for this case (save as scene.toml, then `liesuslov run scene.toml`)")
+    if skipped:
+        print(f"# {', '.join(skipped)} are Python functions: the example ones are used (set them in Python)")
+    sys.stdout.write(to_toml(doc_toml))
+
+
+def _potential_table(p) -> Any:
+    if p is None or getattr(p, "is_zero", False):
+        return "none"
+    if p.kind == "linear":
+        return {"kind": "linear", "B": np.asarray(p.B).tolist()}
+    if p.kind == "quadratic":
+        B = p.diagonal if p.diagonal is not None else p.matrix
+        return {"kind": "quadratic", "B": np.asarray(B).tolist()}
+    return "none"

@@ -625,3 +625,112 @@ def test_rkmk_order_so3_exact_charts(reconstruct):
     for dinv, phi, side, expected in cases:
         p = _observed_order(RK4, lambda T, A, f=dinv, s=side: f(T, A, s), phi, reconstruct, n=3)
         assert abs(p - expected) < 0.4, (dinv.__name__, side, p)
+
+
+# ----------------------------------------------------------------------------- so(4) = so(3) ⊕ so(3)
+def _so4_basis():
+    def E(i, j):
+        M = np.zeros((4, 4))
+        M[i, j], M[j, i] = 1.0, -1.0
+        return M
+    S = np.stack([E(0, 1) + E(2, 3), E(0, 2) - E(1, 3), E(0, 3) + E(1, 2)])
+    A = np.stack([E(0, 1) - E(2, 3), E(0, 2) + E(1, 3), E(0, 3) - E(1, 2)])
+    return S, A
+
+
+def test_so4_split_is_a_lie_algebra_isomorphism():
+    """so(4) = span S ⊕ span A with [S_i, A_j] = 0, S_i S_j = −δ_ij − ε_ijk S_k, A_i A_j = −δ_ij + ε_ijk A_k."""
+    S, A = _so4_basis()
+    eps3 = np.zeros((3, 3, 3))
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        eps3[i, j, k], eps3[j, i, k] = 1.0, -1.0
+    for i in range(3):
+        for j in range(3):
+            assert np.abs(S[i] @ A[j] - A[j] @ S[i]).max() == 0.0
+            want_S = -np.eye(4) * (i == j) - np.einsum("k,kab->ab", eps3[i, j], S)
+            want_A = -np.eye(4) * (i == j) + np.einsum("k,kab->ab", eps3[i, j], A)
+            assert np.abs(S[i] @ S[j] - want_S).max() == 0.0
+            assert np.abs(A[i] @ A[j] - want_A).max() == 0.0
+    rng = np.random.default_rng(40)
+    X, Y = _skew(rng, (5,), 4), _skew(rng, (5,), 4)
+    p, q = G.so4_split(X)
+    pp, qq = G.so4_split(Y)
+    assert p.shape == q.shape == (5, 3)
+    assert np.abs(G.so4_join(p, q) - X).max() < 4 * EPS
+    assert np.abs(np.einsum("bk,kij->bij", p, S) + np.einsum("bk,kij->bij", q, A) - X).max() < 4 * EPS
+    br = G.so4_join(-2 * np.cross(p, pp), 2 * np.cross(q, qq))
+    assert np.abs(br - (X @ Y - Y @ X)).max() < 1e-14
+    assert np.allclose((X * X).sum((-2, -1)), 4 * ((p * p).sum(-1) + (q * q).sum(-1)), rtol=1e-14, atol=0)
+    # the rotation angles of exp X are |p| + |q| and ||p| − |q||: eigenvalues ±i(|p| ± |q|)
+    ang = np.sort(np.abs(np.linalg.eigvals(X[0]).imag))
+    a, b = np.linalg.norm(p[0]), np.linalg.norm(q[0])
+    assert np.allclose(ang, np.sort([abs(a - b), abs(a - b), a + b, a + b]), rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("theta", (0.0, 1e-300, 1e-9, 1e-4, 0.3, 1.0, np.pi, 5.0, 20.0))
+def test_so4_closed_forms_match_pade_and_solve(theta):
+    """expm_skew / cayley_skew and their actions on n = 4 use the so(3) ⊕ so(3) closed forms: equal to the
+    Padé exponential, the extended-precision oracle and the LU-solved Cayley transform to rounding."""
+    rng = np.random.default_rng(41)
+    X = np.stack([_skew_with_angle(rng, 4, theta), _skew(rng, (), 4, theta), _skew(rng, (), 4, 1.0)])
+    v = rng.standard_normal((3, 4))
+    scale = max(1.0, theta)
+    nrm = np.sqrt(0.5 * (X * X).sum((-2, -1)))
+    R = G.expm_skew(X)
+    assert np.abs(R - G._expm_pade(X, nrm)).max() < 8 * EPS * scale
+    assert _rel(R, _expm_ld(X)) < 8 * EPS * scale
+    assert _orth_err(R) < 4 * EPS * scale
+    assert np.abs(G.expm_skew_apply(X, v) - (R @ v[..., None])[..., 0]).max() < 8 * EPS * scale
+    assert np.abs(G.expm_skew(X[1]) - R[1]).max() < 4 * EPS * scale  # single element = batch
+    C = G.cayley_skew(X)
+    assert np.abs(C - G.cayley(X)).max() < 8 * EPS * scale
+    assert _orth_err(C) < 8 * EPS
+    assert np.abs(G.cayley_skew_apply(X, v) - G.cayley_apply(X, v)).max() < 8 * EPS * scale
+    assert np.abs(G.cayley_skew_apply(X[2], v[0]) - C[2] @ v[0]).max() < 8 * EPS * scale
+    # large batches take the component forms too (small ones the Padé / LU path): the same maps
+    Xb = np.concatenate([np.repeat(X, 100, axis=0), _skew(rng, (20,), 4, 0.01)])
+    vb = rng.standard_normal(Xb.shape[:-1])
+    assert Xb.shape[0] >= max(G._SO4_EXP_MIN_BATCH, G._SO4_CAYLEY_MIN_BATCH)
+    Rb = G.expm_skew(Xb)
+    assert np.abs(Rb - G._expm_pade(Xb, np.sqrt(0.5 * (Xb * Xb).sum((-2, -1))))).max() < 8 * EPS * scale
+    vmax = np.abs(vb).max()
+    assert np.abs(G.expm_skew_apply(Xb, vb) - (Rb @ vb[..., None])[..., 0]).max() < 8 * EPS * scale * vmax
+    assert np.abs(G.cayley_skew(Xb) - G.cayley(Xb)).max() < 8 * EPS * scale
+    assert np.abs(G.cayley_skew_apply(Xb, vb) - G.cayley_apply(Xb, vb)).max() < 8 * EPS * scale * vmax
+
+
+@pytest.mark.parametrize("side", ("left", "right"))
+def test_dexpinv_so3_truncated_is_the_series(side):
+    """``dexpinv_so3(..., order=K)`` is the truncated series of :func:`dexpinv` in closed form, and on
+    so(4) the series is that closed form on each factor (ad_P ↔ −2 p ×, ad_Q ↔ 2 q ×)."""
+    rng = np.random.default_rng(42)
+    th = rng.standard_normal((6, 3)) * np.array([[0.0], [1e-6], [0.05], [0.3], [1.0], [2.0]])
+    a = rng.standard_normal((6, 3))
+    X = _skew(rng, (6,), 4, 0.4)
+    Y = _skew(rng, (6,), 4)
+    p, q = G.so4_split(X)
+    ap, aq = G.so4_split(Y)
+    for order in range(1, 10):
+        want = G.dexpinv(_hat(th), _hat(a), order, side)
+        got = G.dexpinv_so3(th, a, side, order=order)
+        assert np.abs(_hat(got) - want).max() < 1e-14 * (1 + np.abs(want).max()), order
+        want4 = G.dexpinv(X, Y, order, side, skew=True)
+        got4 = G.so4_join(G.dexpinv_so3(-2 * p, ap, side, order=order), G.dexpinv_so3(2 * q, aq, side, order=order))
+        assert np.abs(got4 - want4).max() < 1e-14 * (1 + np.abs(want4).max()), order
+
+
+def test_batch_coefficient_paths_match_the_references():
+    """The fused and polynomial coefficient paths used by the RKMK kernels on batches."""
+    rng = np.random.default_rng(43)
+    special = [0.0, 1e-300, 1e-20, 1e-10, 4e-8, 1e-4, 0.0099, 0.01, 0.2, 0.25, 0.26, 3.0, 30.0]
+    small = [np.concatenate([special[:7], rng.uniform(0, top, 600)]) for top in (1e-9, 1e-4, 0.0099)]
+    large = [np.concatenate([special, rng.uniform(0, 0.3, 600)]), rng.uniform(0.0, 0.25, 600)]
+    # small batches (trigonometric), large ones (Taylor polynomials of adaptive degree), mixed branches
+    for sub in [np.array(special), np.array(special[:7]), np.array(special[7:10])] + small + large:
+        ref = G._rodrigues(sub) + (G._dexp3_coefficient(sub),)
+        for g, r in zip(G._rodrigues_dexp3(sub), ref, strict=True):
+            assert np.max(np.abs(g - r) / np.abs(r)) < 4 * EPS
+        for g, r in zip(G._rodrigues_fast(sub), ref[:3], strict=True):
+            assert np.max(np.abs(g - r) / np.abs(r)) < 4 * EPS
+    for t in (0.0, 1e-12, 0.0099, 0.011, 1.0, 30.0):  # Python floats: the same branches exactly
+        assert G._rodrigues_dexp3(t) == G._rodrigues(t) + (G._dexp3_coefficient(t),)

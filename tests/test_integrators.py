@@ -9,6 +9,8 @@ import liesuslov as ls
 from liesuslov.integrators import METHODS
 from liesuslov.integrators.tableaux import get_tableau
 
+# "numpy": the numpy RKMK stepper (its chart kernels); "auto": the default (compiled when numba is there)
+BACKENDS = ["numpy", "auto"]
 ORDERS = {"lie-euler": 1, "rkmk2": 2, "rkmk-heun": 2, "rkmk3": 3, "rkmk4": 4, "rkmk5": 5, "rkmk8": 8}
 
 
@@ -41,20 +43,21 @@ def end_state(sol):
     return np.concatenate([sol.omega[-1].ravel(), sol.g[-1].ravel()])
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("chart", ["exp", "cayley"])
 @pytest.mark.parametrize("method", list(ORDERS))
-def test_fitted_order_with_reconstruction(method, chart):
+def test_fitted_order_with_reconstruction(method, chart, backend):
     system, Omega0, Gamma0 = general_scene(4)
     T = 1.0
     ref = ls.integrate(system, Omega0, (0.0, T), Gamma0=Gamma0, reconstruct=True, method="rkmk8",
-                       chart=chart, h=T / 256)
+                       chart=chart, h=T / 256, backend=backend)
     p = ORDERS[method]
     ks = {1: (5, 9), 2: (4, 8), 3: (3, 7), 4: (3, 7), 5: (2, 6), 8: (1, 4)}[p]
     hs, errs = [], []
     for k in range(*ks):
         h = T / 2**k
         sol = ls.integrate(system, Omega0, (0.0, T), Gamma0=Gamma0, reconstruct=True, method=method,
-                           chart=chart, h=h)
+                           chart=chart, h=h, backend=backend)
         hs.append(h)
         errs.append(np.max(np.abs(end_state(sol) - end_state(ref))))
     errs = np.array(errs)
@@ -63,15 +66,16 @@ def test_fitted_order_with_reconstruction(method, chart):
     assert abs(slope - p) <= 0.3, (method, chart, slope, errs)
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("method", ["lie-euler", "rkmk2", "rkmk4", "rkmk5", "rkmk8"])
-def test_abelian_so2_equals_classical_rk(method):
+def test_abelian_so2_equals_classical_rk(method, backend):
     """On so(2) (abelian) RKMK with a tableau is the classical RK method with that tableau."""
     B = 2.0
     system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 1.5])),
                              potential=ls.LinearPotential([0.0, B]))
     theta0, xi0, h, N = 0.3, 0.7, 0.1, 20
     Gamma0 = np.array([np.cos(theta0), np.sin(theta0)])
-    sol = ls.integrate(system, [xi0], (0.0, N * h), Gamma0=Gamma0, method=method, h=h)
+    sol = ls.integrate(system, [xi0], (0.0, N * h), Gamma0=Gamma0, method=method, h=h, backend=backend)
     model = system.model(gamma=True)
 
     def f(y):
@@ -90,10 +94,11 @@ def test_abelian_so2_equals_classical_rk(method):
     assert np.allclose(sol.Gamma[-1], [np.cos(y[1]), np.sin(y[1])], atol=1e-13, rtol=0)
 
 
-def test_structure_exact_after_1e5_steps():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_structure_exact_after_1e5_steps(backend):
     system, Omega0, Gamma0 = kt_scene(3)
     sol = ls.integrate(system, Omega0, (0.0, 1000.0), Gamma0=Gamma0, reconstruct=True, method="rkmk4",
-                       h=0.01, t_eval=[1000.0])
+                       h=0.01, t_eval=[1000.0], backend=backend)
     assert sol.stats["steps"] == 100_000
     g = sol.g[-1]
     assert np.max(np.abs(g.T @ g - np.eye(3))) < 1e-12
@@ -114,8 +119,9 @@ def test_gamma_read_off_g_equals_gamma_moved_by_action():
     assert np.max(np.abs(gamma - gamma[0])) < 1e-13
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("method,kw", [("rkmk4", {"h": 0.05}), ("rkmk45", {"rtol": 1e-8, "atol": 1e-10})])
-def test_batch_equals_loop(method, kw):
+def test_batch_equals_loop(method, kw, backend):
     system, Omega0, Gamma0 = kt_scene(4)
     rng = np.random.default_rng(3)
     Om = np.repeat(Omega0[None], 5, axis=0) * rng.uniform(0.5, 1.5, size=(5, 1, 1))
@@ -123,25 +129,28 @@ def test_batch_equals_loop(method, kw):
     G = rng.normal(size=(1, 2, 4))
     G /= np.linalg.norm(G, axis=-1, keepdims=True)
     te = np.linspace(0, 2, 5)
-    sol = ls.integrate(system, Om, (0.0, 2.0), Gamma0=G, reconstruct=True, method=method, t_eval=te, **kw)
+    sol = ls.integrate(system, Om, (0.0, 2.0), Gamma0=G, reconstruct=True, method=method, t_eval=te, backend=backend,
+                       **kw)
     assert sol.Gamma.shape == (5, 5, 2, 4) and sol.g.shape == (5, 5, 2, 4, 4)
     for i in range(5):
         for j in range(2):
             one = ls.integrate(system, Om[i, 0], (0.0, 2.0), Gamma0=G[0, j], reconstruct=True,
-                               method=method, t_eval=te, **kw)
+                               method=method, t_eval=te, backend=backend, **kw)
             tol = 1e-14 if method == "rkmk4" else 1e-7  # adaptive: shared steps differ from single runs
             assert np.allclose(one.Gamma, sol.Gamma[:, i, j], atol=tol, rtol=0)
             assert np.allclose(one.omega, sol.omega[:, i, j], atol=tol, rtol=0)
 
 
-def test_adaptive_error_falls_with_tolerance():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_adaptive_error_falls_with_tolerance(backend):
     system, Omega0, Gamma0 = general_scene(4)
-    ref = ls.integrate(system, Omega0, (0.0, 5.0), Gamma0=Gamma0, reconstruct=True, method="rkmk8", h=1 / 200)
+    ref = ls.integrate(system, Omega0, (0.0, 5.0), Gamma0=Gamma0, reconstruct=True, method="rkmk8", h=1 / 200,
+                       backend=backend)
     for method in ("rkmk23", "rkmk45", "rkmk853"):
         errs = []
         for rtol in (1e-4, 1e-7, 1e-10):
             sol = ls.integrate(system, Omega0, (0.0, 5.0), Gamma0=Gamma0, reconstruct=True, method=method,
-                               rtol=rtol, atol=rtol * 1e-2, t_eval=[5.0])
+                               rtol=rtol, atol=rtol * 1e-2, t_eval=[5.0], backend=backend)
             assert sol.success
             errs.append(np.max(np.abs(end_state(sol) - end_state(ref))))
         assert errs[0] > errs[1] > errs[2] or errs[2] < 1e-11, (method, errs)
@@ -236,3 +245,112 @@ def test_bad_omega_and_span():
         ls.integrate(system, Omega0, (1.0, 1.0), Gamma0=Gamma0, h=0.1)
     with pytest.raises(TypeError, match="system"):
         ls.integrate("not a system", Omega0, (0.0, 1.0), h=0.1)
+
+
+# ----------------------------------------------------------------------------- chart kernels against the dense path
+def _run_stepper(model, n, method, chart, mode, B, kind, steps=4, h=0.05, seed=0):
+    """``steps`` RKMK steps with the kernel ``kind``: (xi, G, Theta, |err_xi|², |err_Theta|²) after each, and nfev."""
+    from liesuslov.integrators.charts import make_chart
+    from liesuslov.integrators.rkmk import RKMKStepper
+
+    tab = get_tableau(method)
+    st = RKMKStepper(model, tab, make_chart(chart, n, skew=True, order=tab.order, kind=kind), mode, B)
+    rng = np.random.default_rng(seed)
+    xi = 0.7 * rng.standard_normal((B, model.k))
+    xi[-1] *= 0.0 if B > 2 else 1.0  # a trajectory at rest in a batch: Omega = 0
+    gam = rng.standard_normal((B, n))
+    gam /= np.linalg.norm(gam, axis=-1, keepdims=True)
+    G = np.linalg.qr(rng.standard_normal((B, n, n)))[0] if mode == "g" else gam.copy()
+    out = []
+    for _ in range(steps):
+        xi, G, Th, errs = st.step(h, xi, G, gam if (mode == "g" and model.has_gamma) else None,
+                                  want_error=bool(tab.error_weights))
+        st.accept()
+        sq = [np.sum(ex.reshape(B, -1) ** 2, -1) + np.sum(eg.reshape(B, -1) ** 2, -1) for ex, eg in errs]
+        out.append((np.array(xi), np.array(G), np.array(Th), sq))
+    return out, st.nfev, st.kernel
+
+
+def _kernel_scenes():
+    lagrange = ls.cases.CASES["lagrange3"].build().system
+    gyro = ls.cases.CASES["gyroscopic3"].build().system
+    suslov = ls.cases.CASES["suslov3"].build().system  # reduced form, V = 0: attitude without a vertical
+    euler = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])),
+                            constraints=ls.Subspace(ls.so(3), np.eye(3)))
+    return [("so3", lagrange), ("so3", gyro), ("so3", suslov), ("so3", euler),
+            ("so4", kt_scene(4)[0]), ("so4", general_scene(4)[0]), ("coords", kt_scene(5)[0]),
+            ("coords", general_scene(6)[0]),
+            ("lowrank", kt_scene(6)[0]), ("lowrank", kt_scene(17)[0]), ("lowrank", general_scene(9)[0]),
+            ("lowrank", ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.linspace(1.0, 2.0, 17))))]  # V = 0
+
+
+@pytest.mark.parametrize("scene", range(12))
+@pytest.mark.parametrize("chart", ["exp", "cayley"])
+def test_kernels_agree_with_the_dense_path(scene, chart):
+    """The so(3) and so(4) closed forms and the Fedorov–Kozlov low-rank kernel take the same steps as the
+    dense-matrix path to rounding: states, increments Theta, error estimates and nfev, for single
+    trajectories and batches (with one trajectory at rest), both group modes, FSAL and DOP853 tableaux."""
+    kind, system = _kernel_scenes()[scene]
+    n = system.n
+    modes = ("g", "gamma") if system.needs_gamma else ("g",)
+    for mode in modes:
+        model = system.model(gamma=True) if mode == "gamma" else system.model()
+        for method in ("euler", "rk4", "dopri5", "dop853"):
+            for B in (1, 3):
+                a, nfa, ka = _run_stepper(model, n, method, chart, mode, B, kind)
+                b, nfb, kb = _run_stepper(model, n, method, chart, mode, B, "dense")
+                assert (ka, kb, nfa) == (kind, "dense", nfb)
+                for sa, sb in zip(a, b, strict=True):
+                    for u, v in zip(sa[:3], sb[:3], strict=True):
+                        assert np.abs(u - v).max() < 1e-13, (mode, method, B)
+                    scale = np.abs(sa[0]).max() + np.abs(sa[2]).max()  # the estimates are O(h |K|) differences
+                    for u, v in zip(sa[3], sb[3], strict=True):
+                        assert np.abs(np.sqrt(u) - np.sqrt(v)).max() < 1e-13 * scale, (mode, method, B)
+
+
+def test_default_kernels_and_forcing():
+    from liesuslov.integrators.charts import COMPONENT_MIN_BATCH, COORDS_MAX_N, LOWRANK_MIN_N, make_chart
+
+    for n, want in ((3, "so3"), (4, "so4"), (5, "coords"), (COORDS_MAX_N, "coords"), (COORDS_MAX_N + 1, "dense"),
+                    (LOWRANK_MIN_N - 1, "dense"), (LOWRANK_MIN_N, "lowrank")):
+        model = kt_scene(n)[0].model()
+        assert make_chart("exp", n, skew=True, order=4).default_kernel(model) == want
+        want_cay = "dense" if want == "coords" else want
+        assert make_chart("cayley", n, skew=True, order=4).default_kernel(model) == want_cay
+    model4 = kt_scene(4)[0].model()
+    for chart, n in (("exp", 3), ("cayley", 3), ("exp", 4), ("cayley", 4)):  # small batches: the matrix kernel
+        ch = make_chart(chart, n, skew=True, order=4)
+        small = COMPONENT_MIN_BATCH[(f"so{n}", chart)] - 1
+        model = kt_scene(n)[0].model() if n == 3 else model4
+        assert ch.default_kernel(model, small) == ("dense" if small > 1 else f"so{n}")
+        assert ch.default_kernel(model, small + 1) == f"so{n}"
+    multiplier = kt_scene(20)[0].model(form="multiplier")  # full coordinates: not the u ∧ e_n structure
+    assert make_chart("exp", 20, skew=True, order=4).default_kernel(multiplier) == "dense"
+    assert make_chart("exp", 20, skew=True, order=4).default_kernel(general_scene(20)[0].model()) == "lowrank"
+    with pytest.raises(ValueError, match="lowrank"):
+        make_chart("exp", 20, skew=True, order=4, kind="lowrank").kernel(multiplier, 1, 4, need_act=True)
+    with pytest.raises(ValueError, match="so4"):
+        make_chart("exp", 5, skew=True, order=4, kind="so4").kernel(kt_scene(5)[0].model(), 1, 4, need_act=True)
+    with pytest.raises(ValueError, match="kind"):
+        make_chart("exp", 5, skew=True, order=4, kind="fast")
+
+
+def test_large_n_fedorov_kozlov_is_cheap_and_exact():
+    """n = 256: the system and its O(n) model are built without the d×d inertia matrix (d = 32640), and
+    RKMK4 with reconstruction runs on the low-rank kernel (O(n^2) per step) keeping g in SO(n)."""
+    n = 256
+    I = np.linspace(1.0, 2.0, n)
+    J = ls.Inertia.from_mass_tensor(np.diag(I))
+    system = ls.SuslovSystem(J, potential=ls.QuadraticPotential(np.linspace(3.0, 1.0, n)))
+    u = 0.3 * np.cos(np.arange(1, n))
+    Omega0 = np.zeros((n, n))
+    Omega0[: n - 1, n - 1], Omega0[n - 1, : n - 1] = u, -u
+    Gamma0 = np.linspace(0.3, 1.0, n)
+    Gamma0 /= np.linalg.norm(Gamma0)
+    sol = ls.integrate(system, Omega0, (0.0, 0.05), Gamma0=Gamma0, reconstruct=True, h=0.01, backend="numpy")
+    assert "matrix" not in J.__dict__ and "inverse_matrix" not in J.__dict__  # never built
+    g = sol.g[-1]
+    assert np.abs(g.T @ g - np.eye(n)).max() < 1e-13
+    assert abs(np.linalg.norm(sol.Gamma[-1]) - 1.0) < 1e-13
+    E = system.energy(sol.Omega[[0, -1]], sol.Gamma[[0, -1]])
+    assert abs(E[1] - E[0]) < 1e-9

@@ -474,3 +474,69 @@ def test_multipliers_of_the_fk_symmetric_form():
     r, c = np.triu_indices(n - 1, 1)
     want = (I[r] - I[c]) * xi[:, r] * xi[:, c] - (g[:, r] * G[:, c] - G[:, r] * g[:, c])
     np.testing.assert_allclose(s.multipliers(m.omega_coords(xi), G), want, atol=1e-12)
+
+
+# ====================================================================== lazy inertia
+def _dense_K(I):
+    """K[a, b] = <E_a, I E_b + E_b I> from the basis matrices (the definition, O(d n^3))."""
+    E = so(I.shape[0]).representation
+    JE = I @ E + E @ I
+    return np.einsum("aij,bij->ab", E, JE) / 2.0  # <A, B> = -1/2 tr(AB) = 1/2 sum A_ij B_ij for skew A
+
+
+@pytest.mark.parametrize("n", [2, 3, 4, 5, 7])
+@pytest.mark.parametrize("diagonal", [True, False])
+def test_lazy_inertia_equals_the_dense_matrix(n, diagonal, monkeypatch):
+    """Inertia.from_mass_tensor keeps I, builds K only on access, and every action (through K for small
+    dimensions, through I Omega + Omega I and the Sylvester solution above) equals the dense matrix."""
+    from liesuslov.algebra import inertia as inertia_module
+
+    rng = np.random.default_rng(10 * n + diagonal)
+    I = np.diag(rng.uniform(0.5, 2.0, n)) if diagonal else random_spd(rng, n)
+    J = Inertia.from_mass_tensor(I)
+    assert "matrix" not in J.__dict__
+    K = _dense_K(I)
+    x = rng.standard_normal((2, 3, J.dim))
+    D = suslov_distribution(n) if n >= 3 else Subspace(so(2), np.eye(1))
+    S = Subspace(so(n), rng.standard_normal((max(1, J.dim // 2), J.dim)))
+    for limit in (64, 0):  # the K path, then the mass-tensor path (I Omega + Omega I, Sylvester)
+        monkeypatch.setattr(inertia_module, "_DENSE_ACTION_MAX_DIM", limit)
+        np.testing.assert_allclose(J(x), x @ K, rtol=0, atol=1e-14 * np.abs(K).max())
+        np.testing.assert_allclose(J.inverse(J(x)), x, rtol=0, atol=1e-13 * np.linalg.cond(K))
+        np.testing.assert_allclose(J.kinetic_energy(x), 0.5 * np.sum((x @ K) * x, -1), rtol=1e-14)
+        for sub in (D, S):
+            np.testing.assert_allclose(J.restrict(sub), sub.basis @ K @ sub.basis.T, rtol=0, atol=1e-14 * n)
+    assert J.is_invariant(D) == (diagonal or n == 2)
+    assert J._max_abs_entry() == pytest.approx(np.abs(K).max(), rel=1e-15)
+    np.testing.assert_allclose(J.matrix, K, rtol=0, atol=1e-15 * np.abs(K).max())
+    np.testing.assert_allclose(J.inverse_matrix, np.linalg.inv(K), rtol=0, atol=1e-13 * np.linalg.cond(K))
+    assert not J.matrix.flags.writeable and not J.inverse_matrix.flags.writeable
+
+
+def test_lazy_inertia_sparse_restriction_and_invariance():
+    """Diagonal mass tensor, coordinate subspaces: restriction and J-invariance by sparse products, equal
+    to the dense formulas; a subspace mixing eigenspaces is not invariant."""
+    rng = np.random.default_rng(3)
+    n = 6
+    I = rng.uniform(0.5, 2.0, n)
+    J = Inertia.from_mass_tensor(I)
+    K = _dense_K(np.diag(I))
+    D = suslov_distribution(n)
+    assert J._sparse_basis(D.basis) is not None
+    np.testing.assert_allclose(J.restrict(D), np.diag(I[:-1] + I[-1]), rtol=1e-15)
+    assert J.is_invariant(D) and J.is_invariant(D.complement())
+    mixed = Subspace(so(n), D.basis[0] + D.basis[1])  # E_1n + E_2n: eigenvalues I_1 + I_n != I_2 + I_n
+    np.testing.assert_allclose(J.restrict(mixed), mixed.basis @ K @ mixed.basis.T, rtol=1e-15)
+    assert not J.is_invariant(mixed)
+    assert "matrix" not in J.__dict__
+
+
+def test_fedorov_kozlov_model_never_builds_K():
+    """The O(n) symmetric model at n = 64 (d = 2016) comes from the mass tensor alone."""
+    n = 64
+    J = Inertia.from_mass_tensor(np.linspace(1.0, 2.0, n))
+    s = SuslovSystem(J, potential=QuadraticPotential(np.linspace(3.0, 1.0, n)))
+    m = s.model()
+    assert m.form == "symmetric" and "O(n)" in m.path
+    np.testing.assert_allclose(m.reduced_inertia, np.diag(J.mass_tensor.diagonal()[:-1] + J.mass_tensor[-1, -1]))
+    assert "matrix" not in J.__dict__ and "inverse_matrix" not in J.__dict__

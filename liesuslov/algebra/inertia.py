@@ -3,11 +3,20 @@
 On so(n) a rigid body has ``J(Omega) = I Omega + Omega I`` for its mass tensor I (``MATH.md``);
 in the basis E_ij its matrix is ``K[a, b] = <E_a, I E_b + E_b I>``, diagonal ``I_i + I_j`` when
 I is diagonal. Any SPD matrix in the algebra's coordinates is an inertia operator too.
+
+A mass tensor is kept as it is given: the d×d matrix K (d = n(n-1)/2, so d² ~ n⁴/4 numbers) is
+built only when :attr:`Inertia.matrix` is read. J acts by ``I Omega + Omega I`` (or, for a diagonal
+I, by the diagonal ``I_i + I_j`` of K), its inverse by the Sylvester solution in the eigenbasis of
+I, and restrictions to sparse subspaces (the Fedorov–Kozlov D) touch only their nonzero entries —
+so a body in SO(256) costs O(n²) memory and its reduced model O(n²) time.
 """
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
+import scipy.sparse
 
 from .._validation import as_float_array, check_symmetric
 from .lie import LieAlgebra
@@ -15,6 +24,12 @@ from .so import SpecialOrthogonalAlgebra, so
 from .subspace import Subspace
 
 __all__ = ["Inertia"]
+
+# A general (non-diagonal) mass tensor acts through its d×d matrix K up to this dimension d (one
+# matmul, K built once: 32 KB at d = 64) and through I Omega + Omega I (two n×n products) above it.
+_DENSE_ACTION_MAX_DIM = 64
+# A subspace basis with at most this many nonzeros per row is handled as a sparse matrix.
+_SPARSE_ROW_NNZ = 4
 
 
 class Inertia:
@@ -26,11 +41,26 @@ class Inertia:
     K : array_like, shape (d, d)
         Matrix of J in the algebra's coordinates: ``J(x) = K x`` (K symmetric, so also ``x @ K``).
 
+    Attributes
+    ----------
+    algebra : LieAlgebra
+    mass_tensor : ndarray, shape (n, n), or None
+        The mass tensor I of a body built by :meth:`from_mass_tensor` (None for a given K).
+    diagonal : ndarray, shape (d,), or None
+        The diagonal of K when K is known to be diagonal (a diagonal mass tensor:
+        ``I_i + I_j`` on ``E_ij``), else None.
+
     Raises
     ------
     ValueError
         If K has the wrong shape, is not symmetric, or not positive definite (the message gives
         the smallest eigenvalue).
+
+    Notes
+    -----
+    :attr:`matrix` and :attr:`inverse_matrix` are computed on first access (read-only, cached).
+    Everything else — ``J(x)``, :meth:`inverse`, :meth:`kinetic_energy`, :meth:`restrict`,
+    :meth:`is_invariant` — works from the mass tensor without them.
 
     Examples
     --------
@@ -51,12 +81,12 @@ class Inertia:
         lam = np.linalg.eigvalsh(K)
         if lam[0] <= 0:
             raise ValueError(f"K must be positive definite: its smallest eigenvalue is {lam[0]:.6g}")
+        K.setflags(write=False)
         self.algebra = algebra
-        self.matrix = K
-        self.matrix.setflags(write=False)
-        self.inverse_matrix = np.linalg.inv(K)
-        self.inverse_matrix.setflags(write=False)
+        self.__dict__["matrix"] = K  # fills the cached property
         self.mass_tensor = None if mass_tensor is None else np.array(mass_tensor, dtype=float)
+        self.diagonal = None
+        self._eig = None
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -73,9 +103,15 @@ class Inertia:
         ValueError
             If I is not symmetric, or J is not positive definite: that holds iff
             ``lambda_i + lambda_j > 0`` for every pair i != j of eigenvalues of I.
+
+        Notes
+        -----
+        O(n²) memory and O(n³) time (one symmetric eigendecomposition of I, O(n) for a diagonal
+        I); the d×d matrix :attr:`matrix` is built only if it is read.
         """
         I = as_float_array(I, "I")
-        if I.ndim == 1:
+        vector = I.ndim == 1
+        if vector:
             I = np.diag(I)
         if I.ndim != 2 or I.shape[0] != I.shape[1] or I.shape[0] < 2:
             raise ValueError(f"I (the mass tensor) must be a symmetric (n, n) matrix or a vector of n >= 2 "
@@ -83,16 +119,31 @@ class Inertia:
         check_symmetric(I, "I (the mass tensor)")
         I = 0.5 * (I + I.T)
         n = I.shape[0]
-        lam = np.linalg.eigvalsh(I)
-        if n >= 2 and lam[0] + lam[1] <= 0:
+        diag = np.diag(I).copy()
+        is_diag = vector or not np.any(I - np.diag(diag))
+        if is_diag:
+            lam, V = np.sort(diag), None
+        else:
+            lam, V = np.linalg.eigh(I)
+        if lam[0] + lam[1] <= 0:
             raise ValueError("I (the mass tensor) gives an inertia J(Omega) = I Omega + Omega I that is not "
                              "positive definite: J > 0 iff lambda_i + lambda_j > 0 for all i != j "
                              f"(eigenvalues of I); here the two smallest sum to {lam[0] + lam[1]:.6g}")
+        self = cls.__new__(cls)
         alg = so(n)
-        E = alg.representation
-        JE = I @ E + E @ I  # (d, n, n): J(E_b)
-        K = alg.vee(JE).T  # K[a, b] = <E_a, J(E_b)> = coordinate a of J(E_b)
-        return cls(alg, K, mass_tensor=I)
+        self.algebra = alg
+        self.mass_tensor = I
+        self.mass_tensor.setflags(write=False)
+        if is_diag:
+            r, c = alg._rows, alg._cols
+            kd = diag[r] + diag[c]  # J(E_ij) = (I_i + I_j) E_ij
+            kd.setflags(write=False)
+            self.diagonal = kd
+            self._eig = None
+        else:
+            self.diagonal = None
+            self._eig = (lam, V)
+        return self
 
     @classmethod
     def from_principal_moments(cls, J) -> Inertia:
@@ -124,6 +175,34 @@ class Inertia:
     def dim(self) -> int:
         return self.algebra.dim
 
+    @cached_property
+    def matrix(self) -> np.ndarray:
+        """K, shape (d, d), read-only: ``K[a, b] = <E_a, I E_b + E_b I>`` for a mass tensor (built on first access).
+
+        From ``I E_b + E_b I`` with ``E_b = e_i e_j^T - e_j e_i^T``, the entry on ``E_pq`` (p < q) is
+        ``I_pi δ_qj - I_pj δ_qi + δ_pi I_jq - δ_pj I_iq``: O(d²) work, no (d, n, n) basis tensor.
+        """
+        if self.diagonal is not None:
+            K = np.diag(self.diagonal)
+        else:
+            I = self.mass_tensor
+            r, c = self.algebra._rows, self.algebra._cols
+            p, q = r[:, None], c[:, None]  # the row E_pq
+            i, j = r[None, :], c[None, :]  # the column E_ij
+            K = (I[p, i] * (q == j) - I[p, j] * (q == i) + (p == i) * I[j, q] - (p == j) * I[i, q])
+        K.setflags(write=False)
+        return K
+
+    @cached_property
+    def inverse_matrix(self) -> np.ndarray:
+        """K⁻¹, shape (d, d), read-only (built on first access)."""
+        if self.diagonal is not None:
+            Kinv = np.diag(1.0 / self.diagonal)
+        else:
+            Kinv = np.linalg.inv(self.matrix)
+        Kinv.setflags(write=False)
+        return Kinv
+
     @property
     def principal_moments(self) -> np.ndarray:
         """n = 3: the matrix of J acting on ``w`` (the paper's J), shape (3, 3)."""
@@ -136,32 +215,106 @@ class Inertia:
         return f"Inertia({self.algebra.name})"
 
     # ------------------------------------------------------------------ action
+    def _dense(self) -> bool:
+        """Act through K: a given K, or a small non-diagonal mass tensor (K built once)."""
+        return self.mass_tensor is None or (self.diagonal is None and self.algebra.dim <= _DENSE_ACTION_MAX_DIM)
+
     def __call__(self, x) -> np.ndarray:
-        """``J(x) = K x`` batched: (..., d) -> (..., d)."""
-        return np.asarray(x, dtype=float) @ self.matrix
+        """``J(x) = K x`` batched: (..., d) -> (..., d).
+
+        A diagonal mass tensor multiplies by ``I_i + I_j``; a large general one forms
+        ``vee(I X + X I)`` (O(n³) per element, no d×d matrix).
+        """
+        x = np.asarray(x, dtype=float)
+        if self.diagonal is not None:
+            return x * self.diagonal
+        if self._dense():
+            return x @ self.matrix
+        alg, I = self.algebra, self.mass_tensor
+        X = alg.hat(x)
+        IX = I @ X
+        return alg.vee(IX - np.swapaxes(IX, -1, -2))  # X I = -(I X)^T for skew X
 
     def inverse(self, m) -> np.ndarray:
-        """``J^{-1}(m)`` batched: (..., d) -> (..., d)."""
-        return np.asarray(m, dtype=float) @ self.inverse_matrix
+        """``J^{-1}(m)`` batched: (..., d) -> (..., d).
+
+        A large general mass tensor solves ``I X + X I = M`` in the eigenbasis of ``I = V Λ V^T``:
+        ``X = V ((V^T M V)_ij / (λ_i + λ_j)) V^T`` (O(n³), no d×d matrix).
+        """
+        m = np.asarray(m, dtype=float)
+        if self.diagonal is not None:
+            return m / self.diagonal
+        if self._dense():
+            return m @ self.inverse_matrix
+        alg = self.algebra
+        lam, V = self._eig
+        M = V.T @ alg.hat(m) @ V
+        return alg.vee(V @ (M / (lam[:, None] + lam[None, :])) @ V.T)
 
     def kinetic_energy(self, x) -> np.ndarray:
         """``1/2 <J x, x>``: (..., d) -> (...)."""
         x = np.asarray(x, dtype=float)
-        return 0.5 * np.sum((x @ self.matrix) * x, axis=-1)
+        return 0.5 * np.sum(self(x) * x, axis=-1)
 
     def restrict(self, D: Subspace) -> np.ndarray:
-        """The restriction ``d^T K d`` to a subspace (d = D.basis.T): the reduced mass matrix (k, k)."""
+        """The restriction ``d^T K d`` to a subspace (d = D.basis.T): the reduced mass matrix (k, k).
+
+        A sparse basis (a few nonzeros per row, e.g. the Fedorov–Kozlov ``E_in``) with a diagonal
+        mass tensor costs O(nnz) after an O(k d) scan; otherwise ``B J(B)^T`` (O(k² d)).
+        """
         self._same_algebra(D)
-        return D.basis @ self.matrix @ D.basis.T
+        B = D.basis
+        S = self._sparse_basis(B)
+        if S is not None:
+            KD = (S.multiply(self.diagonal[None, :]) @ S.T).toarray()
+        else:
+            KD = B @ self(B).T
+        return 0.5 * (KD + KD.T)
 
     def is_invariant(self, D: Subspace, tol: float = 1e-10) -> bool:
-        """True iff ``J(D) ⊂ D`` (D is a sum of eigenspaces of J), the condition for form (2.3)."""
+        """True iff ``J(D) ⊂ D`` (D is a sum of eigenspaces of J), the condition for form (2.3).
+
+        Tested as ``|x - P x| <= tol max(1, max|K|) max(1, |x|)`` for the images x of the basis rows
+        (P the orthogonal projector on D), sparse for a sparse basis and a diagonal mass tensor.
+        """
         self._same_algebra(D)
         if D.dim == 0:
             return True
-        KD = D.basis @ self.matrix
-        scale = float(np.max(np.abs(self.matrix)))
-        return bool(np.all(D.contains(KD, tol * max(1.0, scale))))
+        scale = self._max_abs_entry()
+        atol = tol * max(1.0, scale)
+        B = D.basis
+        S = self._sparse_basis(B)
+        if S is None:
+            return bool(np.all(D.contains(self(B), atol)))
+        X = S.multiply(self.diagonal[None, :]).tocsr()  # J of each basis row, same pattern
+        R = X - (X @ S.T) @ S
+        res = np.sqrt(np.asarray(R.multiply(R).sum(axis=1)).ravel())
+        nx = np.sqrt(np.asarray(X.multiply(X).sum(axis=1)).ravel())
+        return bool(np.all(res <= atol * np.maximum(1.0, nx)))
+
+    # ------------------------------------------------------------------ helpers
+    def _max_abs_entry(self) -> float:
+        """``max |K_ab|`` without K: ``|I_i + I_j|`` on the diagonal, ``|I_pq|`` (p != q) off it."""
+        if self.mass_tensor is None:
+            return float(np.max(np.abs(self.matrix)))
+        if self.diagonal is not None:
+            return float(np.max(np.abs(self.diagonal)))
+        I = self.mass_tensor
+        d = np.diag(I)
+        r, c = self.algebra._rows, self.algebra._cols
+        big = float(np.max(np.abs(d[r] + d[c])))
+        if I.shape[0] >= 3:  # off-diagonal entries of I appear in K only when two basis pairs share an index
+            big = max(big, float(np.max(np.abs(I - np.diag(d)))))
+        return big
+
+    def _sparse_basis(self, B: np.ndarray):
+        """B as a CSR matrix when J is diagonal and B has few nonzeros per row, else None."""
+        if self.diagonal is None or B.shape[0] == 0:
+            return None
+        nnz = int(np.count_nonzero(B))
+        if nnz > _SPARSE_ROW_NNZ * B.shape[0]:
+            return None
+        return scipy.sparse.csr_matrix(B)
 
     def _same_algebra(self, D: Subspace) -> None:
         if not isinstance(D, Subspace):

@@ -113,7 +113,13 @@ class Subspace:
         d = self.algebra.dim
         if self.dim == 0:
             return Subspace(self.algebra, np.eye(d), tol=self.tol)
-        null = scipy.linalg.null_space(self.basis) if self.dim < d else np.zeros((d, 0))
+        B = self.basis
+        nz = B != 0
+        if np.all(nz.sum(axis=1) == 1):  # coordinate subspace (e.g. Fedorov-Kozlov): O(k d), no SVD
+            rest = np.ones(d, dtype=bool)
+            rest[np.argmax(nz, axis=1)] = False
+            return Subspace(self.algebra, np.eye(d)[rest], tol=self.tol)
+        null = scipy.linalg.null_space(B) if self.dim < d else np.zeros((d, 0))
         return Subspace(self.algebra, _canonical_basis(null.T, d), tol=self.tol)
 
     def coordinates(self, x) -> np.ndarray:

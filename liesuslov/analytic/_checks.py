@@ -1,6 +1,7 @@
 """Input checks for the analytic references: each names the argument and says how to fix the call.
 
-The package deliberately depends on numpy and scipy only, so these small checks live here.
+The generic checks are the package's own (:mod:`liesuslov._validation`); the ones specific to the
+references (unit vectors, diagonal mass tensors, symmetric matrices) live here.
 """
 
 from __future__ import annotations
@@ -9,43 +10,19 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import as_float_array, check_positive, check_real
+
 #: Tolerance on ``| |x| - 1 |`` for the unit vectors (Gamma, q, gamma) accepted as input.
 UNIT_TOL = 1e-10
 
 
 def as_array(x: Any, name: str, *, tail: tuple[int, ...] | None = None, ndim_min: int = 0) -> np.ndarray:
     """Convert ``x`` to a finite float64 array, optionally with a fixed trailing shape."""
-    try:
-        arr = np.asarray(x, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real numeric array, got {type(x).__name__}") from exc
-    if arr.ndim < ndim_min:
-        raise ValueError(f"{name} must have at least {ndim_min} dimension(s), got shape {arr.shape}")
-    if tail is not None and (arr.ndim < len(tail) or arr.shape[arr.ndim - len(tail):] != tuple(tail)):
-        want = "(..., " + ", ".join(str(k) for k in tail) + ")"
-        raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or infinite values; pass finite numbers")
-    return arr
+    return as_float_array(x, name, tail=tail, ndim_min=ndim_min)
 
 
-def as_scalar(x: Any, name: str) -> float:
-    """A finite real number."""
-    try:
-        val = float(x)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real number, got {type(x).__name__}") from exc
-    if not np.isfinite(val):
-        raise ValueError(f"{name} must be finite, got {x!r}")
-    return val
-
-
-def as_positive(x: Any, name: str) -> float:
-    """A finite, strictly positive real number."""
-    val = as_scalar(x, name)
-    if val <= 0.0:
-        raise ValueError(f"{name} must be strictly positive, got {x!r}")
-    return val
+as_scalar = check_real  # a finite real number
+as_positive = check_positive  # a finite, strictly positive real number
 
 
 def check_unit(x: np.ndarray, name: str, tol: float = UNIT_TOL) -> None:

@@ -251,6 +251,14 @@ class KharlamovaMotion:
         scale = np.maximum(1.0, np.max(np.abs(roots), axis=-1))
         realish = np.abs(roots.imag) <= self._tol * scale[:, None]
         re = roots.real
+        # Near a separatrix a complex pair of P approaches the real axis (imaginary part ~ the distance
+        # to the separatrix, e.g. Gamma_n(0) when the motion starts on top of the unstable equilibrium):
+        # such a pair is no turning point, the motion passes it slowly (T grows like log). A pair within
+        # asymptotic_tol of the axis is a real (or double) root only if P <= 0 at its real part up to
+        # rounding: a split real pair has P < 0 between its roots, a complex pair P > 0 there.
+        P_re = _polyval_asc(px[:, None, :], re)
+        P_noise = 64.0 * np.finfo(float).eps * _polyval_asc(np.abs(px)[:, None, :], np.abs(re))
+        realish &= (roots.imag == 0.0) | (P_re <= P_noise)
         Gn0 = G0[:, -1]
         p1 = px[:, 1]
         equilibrium = (np.abs(Gn0) <= 1e-15) & (np.abs(p1) <= 1e-14 * (1.0 + np.linalg.norm(u0, axis=-1)))

@@ -37,6 +37,28 @@ its sign ``sigma`` and the variety ``T_c`` is two disjoint tori. On them
 is strictly monotone (``|dt/d tau| in [1, delta^-1/2]``); it is computed by composite Gauss–Legendre
 quadrature on panels shorter than the analyticity radius of the integrand and inverted by
 Newton's method inside the panel found by bisection of the cumulative sums.
+
+Through Gamma_n = 0 (``delta <= 0``, opt-in: ``allow_crossing=True``)
+----------------------------------------------------------------------
+When (4.10) fails, ``R(tau) = delta + sum_i alpha_i sin^2(phi_i^0 + omega_i tau)`` (``= Gamma_n^2``,
+``alpha_i = c_i/(B_i - B_n)``) has zeros on both sides of ``tau = 0``: the tau-time is singular there,
+the motion is not. With ``tau_- < 0 < tau_+`` the nearest zeros, ``tau`` rises from ``tau_-`` to ``tau_+``
+while ``Gamma_n = +sqrt(R) > 0``; at ``tau_+`` ``Gamma_n`` changes sign (``Gamma_n' = R'(tau_+)/2 < 0``)
+and ``tau`` goes back to ``tau_-`` with ``Gamma_n = -sqrt(R)``. So the motion is periodic in t, for
+every n, with period
+
+.. math::
+
+    T = 2\int_{\tau_-}^{\tau_+}\frac{d\tau}{\sqrt{R(\tau)}}
+      = 2\int_0^{\pi/2}\frac{2\,\Delta\sin\theta\cos\theta}{\sqrt{R(\tau_- + \Delta\sin^2\theta)}}\,d\theta,
+    \qquad \Delta = \tau_+ - \tau_-,
+
+a smooth integrand (``R`` has simple zeros at both ends). Near an end ``tau_e`` ``R`` is evaluated as
+``sum_i alpha_i sin(omega_i (tau - tau_e)) sin(phi_i(tau) + phi_i(tau_e))`` (``sin^2 a - sin^2 b =
+sin(a - b) sin(a + b)``), so the integrand keeps full relative accuracy up to the ends; the end panels are
+graded geometrically (near ``delta = 0`` a zero is almost double and the integrand peaks there, so T grows
+like ``log(1/|delta|)``). The zeros are found by sampling R and its local minima. Not covered (ValueError):
+a start exactly on a double zero, and no zero within 8000 periods of the fastest angle.
 """
 
 from __future__ import annotations
@@ -135,9 +157,14 @@ class KlebshTisserandMotion:
         ``(Omega_1n, ..., Omega_{n-1,n})`` at ``t = 0``.
     Gamma0 : array_like, shape (..., n)
         Unit vector at ``t = 0``; the data must satisfy the two-tori condition
-        ``sum_i F_i / (B_i - B_n) < 1`` (then ``Gamma_n`` never vanishes).
+        ``sum_i F_i / (B_i - B_n) < 1`` (then ``Gamma_n`` never vanishes), unless ``allow_crossing``.
     I : array_like, shape (n,)
     B : array_like, shape (n,), ``B_i > B_n`` for ``i < n``.
+    allow_crossing : bool
+        Accept data violating (4.10): ``Gamma_n`` then passes through 0, ``tau`` oscillates between the
+        zeros ``tau_-, tau_+`` of ``Gamma_n^2`` and the motion is periodic in t (module docstring).
+        :meth:`state` and :meth:`tau` cover it; :meth:`time_of_tau` and :meth:`state_at_tau` (where
+        ``Gamma_n``'s sign is not a function of tau) raise for such data.
 
     Attributes
     ----------
@@ -148,14 +175,20 @@ class KlebshTisserandMotion:
     frequencies : ndarray, shape (n-1,)
         ``omega_i``.
     sign : ndarray, shape (...)
-        ``sign(Gamma_n)``, constant on the torus.
+        ``sign(Gamma_n)`` at t = 0, constant on the torus (not for a crossing motion).
     margin : ndarray, shape (...)
-        ``delta = 1 - sum_i c_i/(B_i - B_n) > 0``; ``Gamma_n^2 >= delta``.
+        ``delta = 1 - sum_i c_i/(B_i - B_n)``; ``Gamma_n^2 >= delta`` (``delta <= 0``: ``crossing``).
     energy : ndarray, shape (...)
         ``(B_n + sum_i c_i)/2``.
+    crossing : ndarray of bool, shape (...)
+        Whether ``Gamma_n`` passes through 0 (only with ``allow_crossing``).
+    period : ndarray, shape (...)
+        The period in t of a crossing motion; ``nan`` on the tori (quasi-periodic motion).
+    tau_range : ndarray, shape (..., 2)
+        ``(tau_-, tau_+)`` of a crossing motion; ``(-inf, inf)`` on the tori.
     """
 
-    def __init__(self, u0: Any, Gamma0: Any, I: Any, B: Any) -> None:
+    def __init__(self, u0: Any, Gamma0: Any, I: Any, B: Any, *, allow_crossing: bool = False) -> None:
         I, B = _params(I, B, tori=True)
         n = I.shape[0]
         u0 = C.as_array(u0, "u0", tail=(n - 1,))
@@ -175,13 +208,21 @@ class KlebshTisserandMotion:
         self._alpha = self._c / (B[:-1] - B[-1])
         self._delta = 1.0 - np.sum(self._alpha, axis=-1)
         bad = self._delta <= 0.0
-        if np.any(bad):
+        if np.any(bad) and not allow_crossing:
             worst = float(np.max(1.0 - self._delta))
             raise ValueError(f"u0, Gamma0: sum_i F_i/(B_i - B_n) = {worst:.6g} >= 1 for some initial data; "
                              "Gamma_n can vanish on that invariant variety and the closed form (two "
-                             "disjoint tori, condition (4.10)) does not apply")
+                             "disjoint tori, condition (4.10)) does not apply (allow_crossing=True computes "
+                             "the motion through Gamma_n = 0)")
         self._sigma = np.where(Gamma0[:, -1] > 0.0, 1.0, -1.0)
         self._u0, self._G0 = u0, Gamma0
+        self._cross = bad
+        nb = u0.shape[0]
+        self._period = np.full(nb, np.nan)
+        self._trange = np.tile([-np.inf, np.inf], (nb, 1))
+        self._X = {}
+        for b in np.flatnonzero(bad):
+            self._setup_crossing(int(b))
 
     # ------------------------------------------------------------------------------------ properties
     def _out(self, a: np.ndarray) -> np.ndarray:
@@ -210,6 +251,159 @@ class KlebshTisserandMotion:
     @property
     def energy(self) -> np.ndarray:
         return self._out(0.5 * (self.B[-1] + np.sum(self._c, axis=-1)))
+
+    @property
+    def crossing(self) -> np.ndarray:
+        return self._out(self._cross.copy())
+
+    @property
+    def period(self) -> np.ndarray:
+        return self._out(self._period.copy())
+
+    @property
+    def tau_range(self) -> np.ndarray:
+        return self._out(self._trange.copy())
+
+    # ------------------------------------------------------------------------------ through Gamma_n = 0
+    def _R(self, tau, b: int) -> np.ndarray:
+        """``Gamma_n^2 = R(tau)`` for trajectory b."""
+        ph = self._phi0[b] + self._w * np.asarray(tau, dtype=float)[..., None]
+        return self._delta[b] + np.sum(self._alpha[b] * np.sin(ph) ** 2, axis=-1)
+
+    def _R_near(self, d: np.ndarray, b: int, end: float) -> np.ndarray:
+        """``R(end + d)`` for a zero ``end`` of R, from the offset d itself (full relative accuracy as d -> 0):
+        ``sin^2 a - sin^2 c = sin(a - c) sin(a + c)`` with ``a - c = omega_i d``."""
+        wd = self._w * np.asarray(d, dtype=float)[..., None]
+        pe = self._phi0[b] + self._w * end
+        return np.sum(self._alpha[b] * np.sin(wd) * np.sin(2.0 * pe + wd), axis=-1)
+
+    def _tau_R(self, th: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """``tau = tau_- + Delta sin^2 theta`` and ``R(tau)``, R from the offset to the nearer zero."""
+        lo, hi = self._trange[b]
+        D = hi - lo
+        s2, c2 = np.sin(th) ** 2, np.cos(th) ** 2
+        near_lo = s2 <= 0.5
+        d_lo, d_hi = D * s2, -D * c2
+        tau = np.where(near_lo, lo + d_lo, hi + d_hi)
+        R = np.where(near_lo, self._R_near(d_lo, b, lo), self._R_near(d_hi, b, hi))
+        return tau, R
+
+    def _dR(self, tau, b: int) -> np.ndarray:
+        """``R'(tau) = sum_i alpha_i omega_i sin(2 phi_i(tau))``."""
+        ph = self._phi0[b] + self._w * np.asarray(tau, dtype=float)[..., None]
+        return np.sum(self._alpha[b] * self._w * np.sin(2.0 * ph), axis=-1)
+
+    def _zero(self, b: int, direction: float) -> float:
+        """The first zero of R from tau = 0 in ``direction``.
+
+        R is sampled at 1/20 of the fastest period of its angles; a dip below zero between two positive
+        samples is caught at the local minimum (a sign change of R' from - to + along ``direction``), so a
+        pair of close zeros (data near ``delta = 0``) is not missed.
+        """
+        from scipy.optimize import brentq
+
+        H = 0.05 / float(np.max(self._w))
+        xtol, rtol = 1e-15, 4 * np.finfo(float).eps
+
+        def root(a: float, c: float) -> float:
+            return float(brentq(lambda x: float(self._R(x, b)), a, c, xtol=xtol, rtol=rtol, maxiter=200))
+
+        lo = 0.0
+        for _ in range(200):  # blocks of 256 samples: up to ~8000 periods of the fastest angle
+            grid = lo + direction * H * np.arange(0, 257)
+            R = self._R(grid, b)
+            slope = direction * self._dR(grid, b)  # dR along the search direction
+            for j in range(1, grid.size):
+                if R[j] <= 0.0:
+                    if R[j] == 0.0:
+                        return float(grid[j])
+                    if R[j - 1] <= 0.0:  # only at j = 1, starting on Gamma_n = 0 toward R < 0
+                        raise ValueError("u0, Gamma0: Gamma_n = 0 at t = 0 and it would not change sign "
+                                         "(a double zero of Gamma_n^2); the closed form does not cover it")
+                    return root(float(grid[j - 1]), float(grid[j]))
+                if slope[j - 1] < 0.0 <= slope[j]:  # a local minimum inside: is R negative there?
+                    m = float(brentq(lambda x: float(self._dR(x, b)), float(grid[j - 1]), float(grid[j]),
+                                     xtol=xtol, rtol=rtol, maxiter=200)) if slope[j] > 0.0 else float(grid[j])
+                    if float(self._R(m, b)) <= 0.0:
+                        return root(float(grid[j - 1]), m)
+            lo = float(grid[-1])
+        raise ValueError("u0, Gamma0: Gamma_n^2 = R(tau) shows no zero within 8000 periods although "
+                         "sum_i F_i/(B_i - B_n) >= 1 (a near-miss of the quasi-periodic R); not covered")
+
+    def _dt_dtheta(self, th: np.ndarray, b: int) -> np.ndarray:
+        """``dt/d theta = 2 Delta sin cos / sqrt(R)`` at ``tau = tau_- + Delta sin^2 theta`` (smooth)."""
+        lo, hi = self._trange[b]
+        th = np.maximum(th, 1e-100)  # theta = 0 exactly would be 0/0 (the limit 2 sqrt(Delta/R'(tau_-)))
+        _, R = self._tau_R(th, b)
+        return 2.0 * (hi - lo) * np.sin(th) * np.cos(th) / np.sqrt(np.maximum(R, np.finfo(float).tiny))
+
+    def _int_theta(self, a: np.ndarray, c: np.ndarray, b: int) -> np.ndarray:
+        mid, half = 0.5 * (a + c), 0.5 * (c - a)
+        nodes = mid[..., None] + half[..., None] * _GL_X
+        return half * np.sum(self._dt_dtheta(nodes, b) * _GL_W, axis=-1)
+
+    def _setup_crossing(self, b: int) -> None:
+        Gn0 = self._G0[b, -1]
+        if Gn0 != 0.0:
+            lo, hi = self._zero(b, -1.0), self._zero(b, 1.0)
+        else:  # starting on Gamma_n = 0: R'(0) = 2 Gamma_n'(0) says which side the motion is on
+            dR = float(np.sum(self._alpha[b] * self._w * np.sin(2.0 * self._phi0[b])))
+            if dR == 0.0:
+                raise ValueError("u0, Gamma0: Gamma_n = 0 and Gamma_n' = 0: an equilibrium of the tau-motion; "
+                                 "the closed form does not cover it")
+            lo, hi = (0.0, self._zero(b, 1.0)) if dR > 0.0 else (self._zero(b, -1.0), 0.0)
+        self._trange[b] = lo, hi
+        npan = int(np.ceil((hi - lo) * np.max(self._w) / 0.25)) + 1
+        edges = np.linspace(0.0, 0.5 * np.pi, npan + 1)
+        # grade the end panels geometrically (30 halvings): where R' is small at a zero (data near
+        # delta = 0) dt/d theta has a peak of width ~sqrt(R'/(R'' Delta)) at that end
+        h0 = edges[1]
+        grade = h0 * 0.5 ** np.arange(1, 31)
+        edges = np.unique(np.concatenate([edges, grade, 0.5 * np.pi - grade]))
+        pieces = self._int_theta(edges[:-1], edges[1:], b)
+        cum = np.concatenate([[0.0], np.cumsum(pieces)])
+        half = float(cum[-1])
+        self._period[b] = 2.0 * half
+        th0 = np.arcsin(np.sqrt(np.clip(-lo / (hi - lo), 0.0, 1.0)))
+        t0 = self._t_theta(np.array([th0]), b, edges, cum)[0]
+        if Gn0 > 0.0 or (Gn0 == 0.0 and lo == 0.0):
+            p0 = t0
+        else:
+            p0 = 2.0 * half - t0
+        self._X[b] = (edges, cum, p0)
+
+    def _t_theta(self, th: np.ndarray, b: int, edges: np.ndarray, cum: np.ndarray) -> np.ndarray:
+        """Time from ``tau_-`` (ascending) to ``theta``."""
+        j = np.clip(np.searchsorted(edges, th, side="right") - 1, 0, edges.size - 2)
+        return cum[j] + self._int_theta(edges[j], th, b)
+
+    def _state_crossing(self, t: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(tau, Gamma_n)`` at the times t (1-D) of crossing trajectory b."""
+        edges, cum, p0 = self._X[b]
+        T = self._period[b]
+        half = 0.5 * T
+        p = np.mod(p0 + t, T)
+        up = p <= half
+        target = np.where(up, p, T - p)
+        j = np.clip(np.searchsorted(cum, target, side="right") - 1, 0, edges.size - 2)
+        a, c = edges[j], edges[j + 1]
+        frac = (target - cum[j]) / np.where(cum[j + 1] > cum[j], cum[j + 1] - cum[j], 1.0)
+        th = a + np.clip(frac, 0.0, 1.0) * (c - a)
+        lo_b, hi_b = a.copy(), c.copy()
+        for _ in range(60):
+            f = cum[j] + self._int_theta(a, th, b) - target
+            lo_b = np.where(f <= 0.0, th, lo_b)
+            hi_b = np.where(f >= 0.0, th, hi_b)
+            new = th - f / self._dt_dtheta(th, b)
+            bad = ~((new >= lo_b) & (new <= hi_b))
+            new = np.where(bad, 0.5 * (lo_b + hi_b), new)
+            step = float(np.max(np.abs(new - th), initial=0.0))
+            th = new
+            if step <= 1e-15:
+                break
+        tau, R = self._tau_R(th, b)
+        gn = np.where(up, 1.0, -1.0) * np.sqrt(np.maximum(R, 0.0))
+        return tau, gn
 
     # ------------------------------------------------------------------------------------ internals
     def _g(self, tau: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -250,13 +444,34 @@ class KlebshTisserandMotion:
 
     def time_of_tau(self, tau: Any) -> np.ndarray:
         """``t(tau) = int_0^tau d tau' / Gamma_n(tau')``; ``tau`` any shape → ``tau.shape + batch_shape``."""
+        self._refuse_crossing("time_of_tau")
         tt, k, shape = self._flat(tau, "tau")
         return (self._sigma[k] * self._abs_time(tt, k)).reshape(shape)
+
+    def _refuse_crossing(self, what: str) -> None:
+        if np.any(self._cross):
+            raise ValueError(f"{what}: Gamma_n passes through 0 for some initial data (crossing); tau is not "
+                             "monotone in t there and Gamma_n's sign is not a function of tau — use state(t)")
 
     def tau(self, t: Any) -> np.ndarray:
         """The new time ``tau(t)`` (inverse of :meth:`time_of_tau`), shape ``t.shape + batch_shape``."""
         tt, k, shape = self._flat(t, "t")
-        return self._tau(tt, k).reshape(shape)
+        return self._tau_gn(tt, k)[0].reshape(shape)
+
+    def _tau_gn(self, t: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """tau(t) for every trajectory, and Gamma_n where a crossing motion fixes it (else None)."""
+        if not np.any(self._cross):
+            return self._tau(t, k), None
+        tau = np.empty_like(t)
+        gn = np.full_like(t, np.nan)
+        tori = ~self._cross[k]
+        if np.any(tori):
+            tau[tori] = self._tau(t[tori], k[tori])
+        for b in np.flatnonzero(self._cross):
+            sel = k == b
+            if np.any(sel):
+                tau[sel], gn[sel] = self._state_crossing(t[sel], int(b))
+        return tau, gn
 
     def _tau(self, t: np.ndarray, k: np.ndarray) -> np.ndarray:
         target = self._sigma[k] * t            # int_0^tau 1/|Gamma_n| = sigma t
@@ -292,6 +507,7 @@ class KlebshTisserandMotion:
 
         Returns ``u`` of shape ``tau.shape + batch_shape + (n-1,)`` and ``Gamma`` ``(..., n)``.
         """
+        self._refuse_crossing("state_at_tau")
         tt, k, shape = self._flat(tau, "tau")
         u, G = self._state_tau(tt, k)
         return u.reshape(shape + (self.n - 1,)), G.reshape(shape + (self.n,))
@@ -301,7 +517,8 @@ class KlebshTisserandMotion:
         rc = np.sqrt(self._c[k])
         u = rc / self._k * np.sin(ph)
         Gp = rc / self._a * np.cos(ph)
-        gn = self._sigma[k] * np.sqrt(self._delta[k] + np.sum(self._alpha[k] * np.sin(ph) ** 2, axis=-1))
+        R = self._delta[k] + np.sum(self._alpha[k] * np.sin(ph) ** 2, axis=-1)
+        gn = self._sigma[k] * np.sqrt(np.maximum(R, 0.0))  # (crossing motions: R ~ -eps at tau_+-)
         return u, np.concatenate([Gp, gn[..., None]], axis=-1)
 
     def state(self, t: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -313,5 +530,9 @@ class KlebshTisserandMotion:
         Gamma : ndarray, shape ``t.shape + batch_shape + (n,)``
         """
         tt, k, shape = self._flat(t, "t")
-        u, G = self._state_tau(self._tau(tt, k), k)
+        tau, gn = self._tau_gn(tt, k)
+        u, G = self._state_tau(tau, k)
+        if gn is not None:
+            cross = self._cross[k]
+            G[..., -1] = np.where(cross, gn, G[..., -1])
         return u.reshape(shape + (self.n - 1,)), G.reshape(shape + (self.n,))

@@ -41,6 +41,7 @@ METHODS: dict[str, Method] = {
 }
 
 _SAFETY, _MIN_FACTOR, _MAX_FACTOR = 0.9, 0.2, 10.0
+BACKENDS = ("auto", "numpy", "numba")
 # Products g <- g phi(Theta) add ~1e-16 per step to |g^T g - I| (linearly when steps are alike: 5e-13
 # after 1e5 steps); a Newton-Schulz step every _RENORM steps (a change of that size, far below the
 # truncation error) keeps g in SO(n) to ~1e-15 whatever the length of the run. Likewise |Gamma| = 1.
@@ -50,7 +51,7 @@ _RENORM = 64
 def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool = False,
               method: str = "rkmk4", chart: str = "exp", h: float | None = None, rtol: float = 1e-8,
               atol: float = 1e-10, t_eval=None, form: str = "auto", first_step: float | None = None,
-              max_steps: int = 10_000_000, progress: bool = False) -> Solution:
+              max_steps: int = 10_000_000, progress: bool = False, backend: str = "auto") -> Solution:
     """Integrate a Suslov / Euler–Poincaré–Suslov system by a Runge–Kutta–Munthe-Kaas method.
 
     The smallest exact model of the scene is integrated (see ``system.model``): reduced
@@ -95,6 +96,14 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         Give up (failed status) after this many steps.
     progress : bool
         Show a progress bar (needs tqdm).
+    backend : {"auto", "numpy", "numba"}
+        Who takes the steps (the time loop, controller and output are the same). "auto" uses the
+        compiled kernel (:mod:`liesuslov.integrators.compiled`, agreeing with numpy to rounding) when
+        numba is installed (``liesuslov[fast]``) and the model qualifies (a polynomial field: built-in
+        potentials, gyroscopic term; a group part on SO(n), n <= 24), else numpy; "numpy" forces the reference
+        path; "numba" requires the kernel and raises ValueError saying why it cannot run. The first
+        compiled run on a machine compiles the kernel (~10–30 s, cached on disk); ``stats["backend"]``
+        says which ran.
 
     Returns
     -------
@@ -120,6 +129,8 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         raise ValueError(f"method must be one of {sorted(METHODS)}, got {method!r}")
     if chart not in CHARTS:
         raise ValueError(f"chart must be one of {CHARTS}, got {chart!r}")
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     meth = METHODS[method]
     t0, t1 = _check_t_span(t_span)
     direction = 1.0 if t1 > t0 else -1.0
@@ -202,20 +213,56 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
 
     tab = get_tableau(meth.tableau)
     ch = make_chart(chart, m, skew=skew, order=tab.order) if mode != "none" else None
-    stepper = RKMKStepper(model, tab, ch, mode, B)
+    if backend == "numpy":
+        stepper, used = RKMKStepper(model, tab, ch, mode, B), "numpy"
+    else:  # the compiled module (and numba) is imported only here
+        from .compiled import make_stepper
+
+        stepper, used = make_stepper(backend, model, tab, ch, mode, B, rtol=rtol if meth.adaptive else None,
+                                     atol=atol if meth.adaptive else None)
     runner = _Run(stepper, model, mode, xi, G, gamma, t0, direction, skew)
     start = time.perf_counter()
     bar = _progress_bar(progress, abs(t1 - t0))
     try:
-        if meth.adaptive:
-            runner.adaptive(t1, t_eval, rtol, atol, first_step, tab, max_steps, bar)
-        else:
-            runner.fixed(t1, t_eval, h, max_steps, bar)
+        # Overflow/invalid values inside a diverging step are expected and detected by the loop
+        # (non-finite state or error -> rejection or a failed status naming the time).
+        with np.errstate(all="ignore"):
+            _drive(runner, meth.adaptive, t1, t_eval, rtol, atol, first_step, tab, h, max_steps, bar)
     finally:
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - start
-    return runner.solution(model, batch_shape, method, chart, wall, B)
+    sol = runner.solution(model, batch_shape, method, chart, wall, B)
+    sol.stats["backend"] = used
+    return sol
+
+
+class _DivergedStep(Exception):
+    """Raised by :func:`_step_or_diverged` when a step's arithmetic broke down (the state is not finite)."""
+
+
+_ARITHMETIC_ERRORS = (_DivergedStep, ArithmeticError, np.linalg.LinAlgError)
+
+
+def _step_or_diverged(step, *args, **kwargs):
+    """``step(*args)``, turning a closed form's domain error on a non-finite input into a divergence.
+
+    ``math.sin(inf)`` raises ``ValueError('math domain error')``; any other ValueError is a real
+    error (a user callable's, say) and propagates.
+    """
+    try:
+        return step(*args, **kwargs)
+    except ValueError as exc:
+        if "math domain error" in str(exc):
+            raise _DivergedStep(str(exc)) from exc
+        raise
+
+
+def _drive(runner, adaptive, t1, t_eval, rtol, atol, first_step, tab, h, max_steps, bar) -> None:
+    if adaptive:
+        runner.adaptive(t1, t_eval, rtol, atol, first_step, tab, max_steps, bar)
+    else:
+        runner.fixed(t1, t_eval, h, max_steps, bar)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -224,6 +271,14 @@ class _Run:
 
     def __init__(self, stepper: RKMKStepper, model, mode, xi, G, gamma, t0, direction, skew):
         self.stepper, self.model, self.mode, self.skew = stepper, model, mode, skew
+        if hasattr(stepper, "theta_out"):
+            stepper.theta_out = False  # the loop never reads the increment: skip its assembly
+        m = int(model.n) if mode != "none" else 0
+        # components of the error norm: xi and the m×m increment Theta (whatever layout the stepper uses)
+        self.ncomp = int(model.k) + (m * m if mode != "none" else 0)
+        # Newton–Schulz costs O(n^3): every max(_RENORM, n) steps keeps it O(n^2) per step (the drift
+        # between two re-projections stays ~n·1e-16, far below the truncation error).
+        self.renorm = max(_RENORM, m)
         self.xi, self.G, self.gamma = xi, G, gamma
         self.t, self.direction = t0, direction
         self.ts, self.xis, self.Gs = [], [], []
@@ -237,13 +292,15 @@ class _Run:
             self.Gs.append(self.G)
 
     def _finite(self, xi1, G1) -> bool:
-        return bool(np.isfinite(xi1).all() and (G1 is None or np.isfinite(G1).all()))
+        # one reduction per array: a sum is finite iff every term is (an overflow of the sum itself
+        # needs entries ~1e308 / size, a failed run anyway)
+        return math.isfinite(xi1.sum()) and (G1 is None or math.isfinite(G1.sum()))
 
     def advance(self, xi1, G1, t_new: float) -> None:
-        """Accept the step: move the state (re-projecting the group part every _RENORM steps)."""
+        """Accept the step: move the state (re-projecting the group part every max(_RENORM, n) steps)."""
         self.stepper.accept()
         self.steps += 1
-        if G1 is not None and self.steps % _RENORM == 0:
+        if G1 is not None and self.steps % self.renorm == 0:
             if self.mode == "g" and self.skew:
                 G1 = groups.orthonormalize(G1)
             elif self.mode == "gamma":
@@ -280,7 +337,10 @@ class _Run:
         step = self.stepper.step
         for t_next in stops:
             hh = t_next - self.t
-            xi1, G1, _, _ = step(hh, self.xi, self.G, self.gamma)
+            try:
+                xi1, G1, _, _ = _step_or_diverged(step, hh, self.xi, self.G, self.gamma)
+            except _ARITHMETIC_ERRORS:  # e.g. math.sin(inf) in a closed form: a diverged step
+                xi1 = G1 = np.full(1, np.nan)
             if not self._finite(xi1, G1):
                 self._fail(f"non-finite state at t = {t_next:.17g} (step from t = {self.t:.17g}); "
                            "the step size is probably too large for this motion")
@@ -326,8 +386,13 @@ class _Run:
             h = (target - self.t) if hit else self.direction * h_abs
             rejected_before = False
             while True:
-                xi1, G1, _, errs = stepper.step(h, self.xi, self.G, self.gamma, want_error=True)
-                err = self._error_norm(errs, xi1, rtol, atol, abs(h))
+                try:
+                    xi1, G1, _, errs = _step_or_diverged(stepper.step, h, self.xi, self.G, self.gamma,
+                                                         want_error=True)
+                    err = self._error_norm(errs, xi1, rtol, atol, abs(h))
+                except _ARITHMETIC_ERRORS:  # a diverged trial step: reject it like an infinite error
+                    stepper.reset()
+                    err = np.inf
                 if not np.isfinite(err):
                     err = np.inf
                 if err <= 1.0:
@@ -366,15 +431,22 @@ class _Run:
         sq = []
         for ex, eg in errs:
             s = np.sum((ex / sc_xi) ** 2, axis=-1)
-            if eg is not None:
+            if eg is not None:  # any layout whose squares sum to |err Theta|_F^2 (see RKMKStepper.step)
                 s = s + np.sum(eg.reshape(eg.shape[0], -1) ** 2, axis=-1) / sc_g ** 2
             sq.append(s)
-        ncomp = xi1.shape[-1] + (0 if errs[0][1] is None else errs[0][1][0].size)
+        ncomp = self.ncomp
         if len(sq) == 1:
             return float(np.sqrt(np.max(sq[0]) / ncomp))
         e5, e3 = sq
+        if e5.size == 1:  # one trajectory: the combination on floats
+            a, b = float(e5[0]), float(e3[0])
+            d = a + 0.01 * b
+            if not math.isfinite(d):  # a NaN/inf estimate must reject the step, never pass as 0
+                return math.inf
+            return a / math.sqrt(d * ncomp) if d > 0 else 0.0
         denom = e5 + 0.01 * e3
-        per = np.where(denom > 0, e5 / np.sqrt(np.where(denom > 0, denom, 1.0) * ncomp), 0.0)
+        per = np.where(denom > 0, e5 / np.sqrt(np.where(denom > 0, denom, 1.0) * ncomp),
+                       np.where(denom == 0, 0.0, np.inf))
         return float(np.max(per))
 
     def _initial_step(self, rtol, atol, order) -> float:

@@ -97,11 +97,12 @@ class CaseEntry:
 
 # ====================================================================== helpers
 def _energy(system: SuslovSystem) -> Integral:
-    K = system.inertia.matrix
+    # Through the inertia operator (lazy for a mass tensor), never its dense d x d matrix.
+    kinetic = system.inertia.kinetic_energy
     pot = system.potential
 
     def energy(x, G):
-        E = 0.5 * np.sum((x @ K) * x, axis=-1)
+        E = kinetic(x)
         return E + pot.V(G) if not pot.is_zero else E
     return energy
 

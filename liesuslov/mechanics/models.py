@@ -13,7 +13,9 @@ A :class:`Model` is built by :meth:`SuslovSystem.model`; it carries the reduced 
 Everything is precomputed at construction; the hot functions are closures over constant arrays,
 with no validation. The Fedorov–Kozlov symmetric form with a diagonal ``K_D`` is O(n):
 ``xi_i' = (dV_i Gamma_n - Gamma_i dV_n) / (I_i + I_n)``, specialised further for linear and diagonal
-quadratic potentials (two or three numpy operations per call).
+quadratic potentials (two or three numpy operations per call). ``K_D`` comes from the inertia's
+action (:meth:`Inertia.restrict`), never from the d×d matrix K: O(n²) for a diagonal mass tensor, so
+a body in SO(256) builds its model without the 32640² matrix.
 """
 
 from __future__ import annotations
@@ -29,6 +31,9 @@ __all__ = ["Model", "build_model"]
 
 # Quadratic term: a dense (k*k, k) tensor below this k, matrix commutators on so(n) above it.
 _TENSOR_MAX_K = 16
+# Fedorov–Kozlov Omega(xi) by one matmul with the (n - 1, n*n) basis up to this n, by two writes into
+# a zero matrix above it (the basis would hold ~n^3 numbers).
+_FK_MATMUL_MAX_N = 32
 
 
 class Model:
@@ -67,7 +72,8 @@ class Model:
     * ``xi_dot(xi, Gamma) -> (..., k)``: the reduced field (hot path, no validation). Pass ``xi`` and
       ``Gamma`` with the same batch shape: where the field does not depend on ``xi`` (symmetric
       form) the result takes Gamma's.
-    * ``omega_matrix(xi) -> (..., n, n)``: Omega in the representation (hot path).
+    * ``omega_matrix(xi) -> (..., n, n)``: Omega in the representation, linear in ``xi`` (one matmul with
+      the flattened basis; the RKMK kernels read that basis off ``omega_matrix(eye(k))`` once).
     * ``omega_coords(xi) -> (..., d)``: Omega in the algebra's coordinates.
     * ``xi_from_coords(x) -> (..., k)``: ``xi`` of a point ``x`` of D (the caller checks ``x`` in D).
     * ``Gamma_dot(xi, Gamma) -> (..., n)``: ``-Omega Gamma`` (reference; integrators move Gamma by
@@ -131,15 +137,15 @@ def build_model(system: SuslovSystem, form: str, has_gamma: bool) -> Model:
         return _multiplier_model(system, has_gamma)
     D = system.constraints
     B = np.ascontiguousarray(D.basis)
-    K = system.inertia.matrix
-    KD = B @ K @ B.T
-    KD = 0.5 * (KD + KD.T)
+    # K_D = B K B^T from the inertia's action (O(n^2) for the Fedorov–Kozlov D and a diagonal mass
+    # tensor): the d×d matrix K is never formed here.
+    KD = system.inertia.restrict(D)
     fk = system.is_fedorov_kozlov
     maps = _fk_maps(system) if fk else _basis_maps(system, B)
     if fk and form == "symmetric":
         xi_dot, path = _fk_symmetric_field(system, KD)
     else:
-        xi_dot, path = _general_field(system, B, K, KD, form)
+        xi_dot, path = _general_field(system, B, KD, form)
     return Model(system=system, form=form, subspace=D, has_gamma=has_gamma, fedorov_kozlov=fk,
                  reduced_inertia=KD, xi_dot=xi_dot, path=path, **maps)
 
@@ -151,12 +157,21 @@ def _fk_maps(system: SuslovSystem) -> dict:
     m = n - 1
     d = system.algebra.dim
     idx = np.array([system.algebra.index(i, m) for i in range(m)])
+    if n <= _FK_MATMUL_MAX_N:
+        R = np.zeros((m, n, n))  # R[i] = E_in
+        R[np.arange(m), np.arange(m), m] = 1.0
+        R[np.arange(m), m, np.arange(m)] = -1.0
+        R = R.reshape(m, n * n)
+        nn = (n, n)
 
-    def omega_matrix(xi):
-        X = np.zeros(xi.shape[:-1] + (n, n))
-        X[..., :m, m] = xi
-        X[..., m, :m] = -xi
-        return X
+        def omega_matrix(xi):  # one matmul with the flattened basis E_in (entries 0, ±1: exact)
+            return (xi @ R).reshape(xi.shape[:-1] + nn)
+    else:
+        def omega_matrix(xi):  # O(n^2) memory, no (n - 1, n^2) basis
+            X = np.zeros(xi.shape[:-1] + (n, n))
+            X[..., :m, m] = xi
+            X[..., m, :m] = -xi
+            return X
 
     def omega_coords(xi):
         x = np.zeros(xi.shape[:-1] + (d,))
@@ -177,14 +192,13 @@ def _basis_maps(system: SuslovSystem, B: np.ndarray) -> dict:
     """Maps through the basis rows B (k, d) of D: x = xi @ B."""
     alg = system.algebra
     Bt = np.ascontiguousarray(B.T)
-    R = alg.representation
-    if R is None:
+    r = alg.matrix_size
+    if r is None:
         def omega_matrix(xi):
             raise ValueError(f"{alg.name} has no matrix representation: no omega_matrix")
         Gamma_dot = omega_matrix
     else:
-        r = R.shape[1]
-        BR = B @ R.reshape(R.shape[0], r * r)
+        BR = alg.hat(B).reshape(B.shape[0], r * r)  # hat of the basis rows (no (d, r, r) basis tensor on so(n))
 
         def omega_matrix(xi):
             return (xi @ BR).reshape(xi.shape[:-1] + (r, r))
@@ -203,13 +217,14 @@ def _basis_maps(system: SuslovSystem, B: np.ndarray) -> dict:
 
 
 # ---------------------------------------------------------------------- general fields
-def _general_field(system: SuslovSystem, B, K, KD, form: str):
+def _general_field(system: SuslovSystem, B, KD, form: str):
     """xi' = L (ad*_x K x + tau(Gamma) + gyro) for any D, as a sum of precomputed terms."""
     alg = system.algebra
     k = B.shape[0]
     L = np.linalg.solve(KD, B)  # K_D^-1 B, (k, d)
     Lt = np.ascontiguousarray(L.T)  # (d, k): row-vector form, out = f @ Lt
-    BK = KD @ B if form == "eigenspace" else B @ K  # eigenspace: J(D) ⊂ D, so B K = K_D B
+    # B K: the rows J(B_a) (K symmetric); eigenspace: J(D) ⊂ D, so B K = K_D B exactly in D
+    BK = KD @ B if form == "eigenspace" else system.inertia(B)
     terms: list[Callable] = []
     parts: list[str] = []
     if form != "symmetric":
@@ -225,8 +240,7 @@ def _general_field(system: SuslovSystem, B, K, KD, form: str):
             parts.append("quadratic tensor")
         else:  # so(n) with a large D: [M, X] = P - P^T with P = M X, one matmul
             n = system.n
-            E = alg.representation.reshape(alg.dim, n * n)
-            BR, BKR = B @ E, BK @ E
+            BR, BKR = alg.hat(B).reshape(k, n * n), alg.hat(BK).reshape(k, n * n)
             W = _skew_map(n, Lt)
 
             def quadratic(xi, G):
@@ -317,7 +331,7 @@ def _fk_symmetric_field(system: SuslovSystem, KD: np.ndarray):
     eps = system.gyroscopic
     kd = np.diag(KD).copy()
     diagonal = np.array_equal(KD, np.diag(kd))
-    KDinv = np.linalg.inv(KD)
+    KDinv = None if diagonal else np.linalg.inv(KD)  # O(n^3): only when K_D is not diagonal
     field: Callable | None = None
     if not system.has_potential:
         path = "V = 0"

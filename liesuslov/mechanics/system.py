@@ -19,7 +19,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .._validation import as_float_array
+from .._validation import as_float_array, check_real
 from ..algebra import Inertia, SpecialOrthogonalAlgebra, Subspace, suslov_distribution
 from .potentials import Potential, ZeroPotential
 
@@ -120,12 +120,7 @@ class SuslovSystem:
                 _probe_potential(potential, self.n)
         self.potential = potential
         # ---- gyroscopic term
-        try:
-            eps = float(gyroscopic)
-        except (TypeError, ValueError) as exc:
-            raise TypeError(f"gyroscopic must be a real number, got {type(gyroscopic).__name__}") from exc
-        if not np.isfinite(eps):
-            raise ValueError(f"gyroscopic must be finite, got {gyroscopic!r}")
+        eps = check_real(gyroscopic, "gyroscopic")
         if eps != 0.0 and not (self.is_so and self.n == 3):
             raise ValueError(f"gyroscopic must be 0 on {alg.name}: the gyroscopic force eps * Gamma x w "
                              "is defined for n = 3 (so(3)) only")

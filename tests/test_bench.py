@@ -1,0 +1,145 @@
+"""The work-precision benchmark's machinery, on a tiny configuration (the numbers are not asserted)."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import inspect
+import math
+
+import numpy as np
+import pytest
+
+import liesuslov as ls
+from liesuslov import bench
+
+# The numpy path: a fresh clone must not wait for the one-off compilation of an optional kernel.
+BACKEND = "numpy" if "backend" in inspect.signature(ls.integrate).parameters else None
+TINY = bench.BenchConfig(
+    scenes=("lagrange",), methods=("rkmk4", "rkmk853"), charts=("exp", "cayley"), scipy_methods=("DOP853",),
+    fixed_factors={"rkmk4": (0.5, 4)}, tolerances={"rkmk853": (1e-5, 1e-10), "DOP853": (1e-5, 1e-10)},
+    repeats=1, batch_sizes=(1, 10), batch_dims=(3,), scaling_sizes=(3, 4), long_run_steps=0, plots=False,
+    backend=BACKEND, preset="test")
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    docs = out / "docs" / "performance.md"
+    report = bench.run_bench(out, config=TINY, progress=False, docs=docs)
+    with open(out / "results.csv", newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    return out, report, rows
+
+
+def _f(x: str) -> float:
+    return float(x) if x not in ("", None) else math.nan
+
+
+def test_results_csv_columns_and_rows(tiny):
+    out, report, rows = tiny
+    with open(out / "results.csv", newline="", encoding="utf-8") as fh:
+        header = next(csv.reader(fh))
+    assert tuple(header) == bench.RESULT_COLUMNS
+    # rkmk4 and rkmk853 in two charts at two settings, DOP853 at two settings
+    assert len(rows) == 2 * 2 * 2 + 2 == len(report.rows)
+    assert {r["route"] for r in rows} == {"liesuslov rkmk4/exp", "liesuslov rkmk4/cayley", "liesuslov rkmk853/exp",
+                                          "liesuslov rkmk853/cayley", "scipy DOP853"}
+    assert all(r["status"] == "ok" for r in rows)
+    for r in rows:
+        assert _f(r["wall_time"]) > 0 and int(r["nfev"]) > 0 and int(r["steps"]) > 0
+        assert r["backend"] == ("scipy" if r["library"] == "scipy" else "numpy")
+        assert np.isfinite(_f(r["err_pendulum"]))  # the Lagrange scene is checked against the pendulum
+        assert _f(r["error"]) >= max(_f(r["err_Omega"]), _f(r["err_Gamma"]), _f(r["err_g"]))
+
+
+def test_errors_fall_with_the_setting(tiny):
+    _, _, rows = tiny
+    by_route: dict[str, list] = {}
+    for r in rows:
+        by_route.setdefault(r["route"], []).append(r)
+    for route, rs in by_route.items():
+        coarse, fine = sorted(rs, key=lambda r: -_f(r["setting"]))
+        assert _f(fine["error"]) < 1e-2 * _f(coarse["error"]), route
+
+
+def test_structure_exact_for_liesuslov_and_reported_for_scipy(tiny):
+    _, report, rows = tiny
+    for r in rows:
+        if r["library"] == "liesuslov":
+            for key in ("orth_defect", "sphere_defect", "constraint_defect"):
+                assert _f(r[key]) <= 1e-12, (r["route"], key)
+        else:
+            assert np.isfinite(_f(r["orth_defect"]))
+            assert np.isfinite(_f(r["sphere_defect"]))
+    loose = [r for r in rows if r["library"] == "scipy" and _f(r["setting"]) == 1e-5]
+    assert _f(loose[0]["orth_defect"]) > 1e-12  # the embedded ODE drifts off SO(3)
+    assert report.references["lagrange"]["uncertainty"] < 1e-10
+
+
+def test_ratio_table_and_outputs(tiny):
+    out, report, _ = tiny
+    assert [r["level"] for r in report.ratios] == list(bench.LEVELS)
+    for r in report.ratios:
+        if np.isfinite(r["ratio"]):
+            assert r["ratio"] == pytest.approx(r["liesuslov_time"] / r["scipy_time"])
+    assert len(report.throughput) == 2 and all(r["status"] == "ok" for r in report.throughput)
+    assert len(report.scaling) == 4 and len(report.scaling_exponent) == 2  # two charts
+    summary = (out / "summary.md").read_text(encoding="utf-8")
+    assert "## Ratio table" in summary and "| CPU |" in summary
+    page = (out / "docs" / "performance.md").read_text(encoding="utf-8")
+    assert "python -m liesuslov.bench --docs docs/performance.md" in page and "## Ratio table" in page
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no staging or temporary files left behind
+    assert set(report.paths) >= {"results", "ratios", "throughput", "nscaling", "summary", "docs"}
+    assert not list(out.glob("*.png"))  # plots=False
+
+
+def test_time_to_reach_interpolates_in_log_log():
+    pts = [(1e-4, 1.0), (1e-6, 100.0)]
+    assert bench.time_to_reach(pts, 1e-5) == pytest.approx(10.0)
+    assert bench.time_to_reach(pts, 1e-3) == pytest.approx(1.0)  # already below at the coarsest setting
+    assert bench.time_to_reach(pts, 1e-8) == math.inf
+    assert bench.time_to_reach([(1e-4, 1.0), (float("nan"), 2.0), (1e-7, 4.0)], 1e-6) < 4.0
+
+
+def test_unknown_scene_is_a_value_error_naming_the_valid_ones(tmp_path):
+    with pytest.raises(ValueError, match="unknown scene") as info:
+        bench.run_bench(tmp_path / "out", scenes=["nope"], progress=False)
+    for name in bench.SCENES:
+        assert name in str(info.value)
+    assert not (tmp_path / "out").exists()  # nothing written
+    with pytest.raises(ValueError, match="repeats"):
+        bench.run_bench(tmp_path / "out", config=TINY, repeats=0, progress=False)
+    with pytest.raises(ValueError, match="valid methods"):
+        bench.run_bench(tmp_path / "out", config=bench.BenchConfig(methods=("rk99",)), progress=False)
+
+
+def test_command_line(tmp_path, capsys):
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    args = parser.parse_args([])
+    assert args.out == "liesuslov-bench" and not args.quick and args.scenes is None and args.repeats is None
+    assert bench.main(["--scenes", "klebsh-tisserand,nope", "--out", str(tmp_path / "x"), "--no-progress"]) == 2
+    assert "valid scenes" in capsys.readouterr().err
+    assert bench.build_scene("euler_top").key == "euler-top"
+
+
+def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch):
+    cfg = bench.BenchConfig(scenes=("suslov3",), methods=("rkmk853",), scipy_methods=("DOP853",),
+                            tolerances={"rkmk853": (1e-6,), "DOP853": (1e-6,)}, repeats=1, batch_sizes=(),
+                            scaling_sizes=(), long_run_steps=0, plots=False, backend=BACKEND)
+
+    def fail(*args, **kwargs):
+        raise OSError("disk full")
+    monkeypatch.setattr(bench, "_summary_sections", fail)
+    with pytest.raises(OSError, match="disk full"):
+        bench.run_bench(tmp_path, config=cfg, progress=False, docs=tmp_path / "performance.md")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_presets():
+    quick, full = bench.BenchConfig.quick().validated(), bench.BenchConfig.full().validated()
+    assert quick.methods == ("rkmk4", "rkmk45", "rkmk853") and quick.long_run_steps == 0
+    assert max(quick.batch_sizes) == 10_000 and max(quick.scaling_sizes) == 64
+    assert set(full.methods) == set(ls.METHODS) and full.long_run_steps == 1_000_000
+    assert max(full.batch_sizes) == 100_000 and max(full.scaling_sizes) == 256

@@ -1,0 +1,185 @@
+"""The command line, called in-process: run, cases, check, bench delegation, clean errors."""
+
+from __future__ import annotations
+
+import functools
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import liesuslov as ls
+from liesuslov import cli
+from liesuslov.scene import DEFAULT_SCENE, scene_from_text
+
+SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
+
+
+def _has_matplotlib() -> bool:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def test_run_default_scene(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert cli.main(["run", "--out", str(out), "--no-figures", "--t-end", "2"]) == 0
+    text = capsys.readouterr().out
+    for expected in ("scene: Klebsh–Tisserand, n = 4", "model: symmetric form on so(4)", "state: 7 + g (4x4) = 23",
+                     "field evaluations", "energy", "F_1", "F_3", "max |g^T g - I|", "max ||Gamma| - 1|",
+                     "max |<a^i, Omega>|"):
+        assert expected in text, expected
+    assert sorted(p.name for p in out.iterdir()) == ["report.txt", "scene.toml", "trajectory.npz"]
+    sol = ls.Solution.load(out / "trajectory.npz")
+    assert sol.success and sol.t[-1] == 2.0 and sol.g.shape[1:] == (4, 4)
+    saved = scene_from_text((out / "scene.toml").read_text(), source="saved")
+    assert saved.t_span == (0.0, 2.0) and not saved.figures  # the overrides are recorded
+    assert "first integrals" in (out / "report.txt").read_text()
+
+
+@pytest.mark.skipif(not _has_matplotlib(), reason="matplotlib not installed")
+def test_run_scene_writes_figures_and_removes_stale_files(tmp_path, capsys):
+    out = tmp_path / "sleigh"
+    out.mkdir()
+    (out / "gamma.png").write_bytes(b"stale")
+    (out / "notes.txt").write_text("mine")
+    assert cli.main(["run", str(SCENES / "chaplygin_sleigh_se2.toml"), "--out", str(out), "--t-end", "3"]) == 0
+    names = {p.name for p in out.iterdir()}
+    assert {"trajectory.npz", "omega.png", "path.png", "energy.png", "report.txt", "scene.toml"} <= names
+    assert "gamma.png" not in names and "notes.txt" in names  # only our own stale outputs are removed
+    assert not [p for p in out.iterdir() if p.name.startswith(".liesuslov-")]  # no temporary left
+    assert (out / "omega.png").read_bytes()[:4] == b"\x89PNG"
+    assert "model: reduced form on se(2)" in capsys.readouterr().out
+
+
+def test_print_default(capsys):
+    assert cli.main(["run", "--print-default"]) == 0
+    assert capsys.readouterr().out == DEFAULT_SCENE
+
+
+def test_cases_table(capsys):
+    assert cli.main(["cases"]) == 0
+    text = capsys.readouterr().out
+    for name, entry in ls.CASES.items():
+        assert f"{name}: {entry.description}" in text
+    assert "integrals   energy, F_1, F_2, F_3" in text  # klebsh_tisserand
+    assert "I1 = 1, In = 2, Bn = 1" in text  # lagrange's example parameters
+
+
+@pytest.mark.parametrize("name", ["kharlamova", "gyroscopic3", "family3"])
+def test_case_template_is_a_runnable_scene(name, capsys):
+    assert cli.main(["cases", name]) == 0
+    text = capsys.readouterr().out
+    template = text[text.index("# a scene for this case"):]
+    scene = scene_from_text(template, source="template").with_options(t_end=0.5)
+    assert scene.case.name == name and scene.run().success
+
+
+def test_check_lagrange3_passes_with_the_reduction_report(capsys, monkeypatch):
+    import inspect
+
+    import liesuslov.reduction as red
+
+    if "backend" not in inspect.signature(red.check_lagrange_reduction).parameters:
+        # keep this test free of a first-use numba compilation (the scene asks for numpy)
+        monkeypatch.setattr(red, "integrate", functools.partial(ls.integrate, backend="numpy"))
+    assert cli.main(["check", str(SCENES / "lagrange3.toml"), "--t-end", "3"]) == 0
+    text = capsys.readouterr().out
+    assert "Lagrange reduction check: SO(3) -> S^2" in text
+    assert "reduction consistent within tol = 1e-08" in text and "check passed" in text
+
+
+def test_check_fails_above_tolerance(capsys):
+    assert cli.main(["check", str(SCENES / "kharlamova5.toml"), "--t-end", "2", "--tol", "1e-18"]) == 1
+    assert "check FAILED" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv", [["run"], ["check"]])
+def test_bad_file_exit_2_one_line(tmp_path, capsys, argv):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(DEFAULT_SCENE.replace("B = [4.0, 3.0, 2.5, 1.0]", "B = [4.0, 3.0, 2.5]"))
+    out = tmp_path / "out"
+    extra = ["--out", str(out)] if argv == ["run"] else []
+    assert cli.main(argv + [str(bad)] + extra) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith("liesuslov: error: ") and "[case.parameters].B" in err
+    assert not out.exists()
+
+
+def test_missing_file_and_usage_errors(tmp_path, capsys):
+    assert cli.main(["run", str(tmp_path / "nope.toml")]) == 2
+    assert "scene file not found" in capsys.readouterr().err
+    assert cli.main(["frobnicate"]) == 2
+    assert cli.main(["run", "--t-end", "x"]) == 2
+    assert cli.main(["cases", "nope"]) == 2
+    assert "unknown case 'nope'" in capsys.readouterr().err
+
+
+def test_debug_shows_the_traceback(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        cli.main(["--debug", "run", str(tmp_path / "nope.toml")])
+
+
+def test_failed_integration_exit_1_nothing_written(tmp_path, capsys):
+    scene = tmp_path / "blowup.toml"
+    scene.write_text("[body]\nprincipal_moments = [[2.0, 0.0, 0.3], [0.0, 3.0, 0.4], [0.3, 0.4, 4.0]]\n"
+                     "[initial]\nw = [100.0, 1000.0, 0.0]\n"
+                     "[integrate]\nt_span = [0.0, 10.0]\nmethod = \"rkmk4\"\nh = 1.0\nt_eval = \"steps\"\n"
+                     "backend = \"numpy\"\n")
+    out = tmp_path / "out"
+    assert cli.main(["run", str(scene), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "the integration failed: non-finite state at t = " in err and "nothing written" in err
+    assert not out.exists()
+
+
+def test_bench_unavailable_is_a_clear_error(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "liesuslov.bench", None)  # makes the import fail
+    assert cli.main(["bench", "--quick"]) == 2
+    err = capsys.readouterr().err
+    assert "the bench command is unavailable" in err and "Traceback" not in err
+    assert cli.main(["run", "--print-default"]) == 0  # the other commands never import it
+
+
+def test_bench_delegates(monkeypatch):
+    seen = {}
+    fake = types.ModuleType("liesuslov.bench")
+
+    def add_arguments(parser):
+        parser.add_argument("--quick", action="store_true")
+
+    def run_from_args(args):
+        seen["quick"] = args.quick
+        return 0
+    fake.add_arguments, fake.run_from_args = add_arguments, run_from_args
+    monkeypatch.setitem(sys.modules, "liesuslov.bench", fake)
+    assert cli.main(["bench", "--quick"]) == 0 and seen == {"quick": True}
+
+
+def test_python_dash_m(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "liesuslov", "--version"], capture_output=True, text=True,
+                       cwd=tmp_path, check=False)
+    assert r.returncode == 0 and r.stdout.startswith("liesuslov ")
+
+
+def test_import_stays_light():
+    code = ("import sys, liesuslov, liesuslov.scene, liesuslov.cli; "
+            "print(any(m in sys.modules for m in ('matplotlib', 'tqdm', 'numba', 'geomstats')))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert r.stdout.strip() == "False"
+
+
+def test_scene_run_matches_cli_trajectory(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert cli.main(["run", str(SCENES / "suslov3.toml"), "--out", str(out), "--no-figures", "--t-end", "1"]) == 0
+    saved = ls.Solution.load(out / "trajectory.npz")
+    from liesuslov.scene import load_scene
+
+    sol = load_scene(SCENES / "suslov3.toml").with_options(t_end=1.0).run()
+    np.testing.assert_array_equal(saved.omega, sol.omega)
