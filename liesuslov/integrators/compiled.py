@@ -355,6 +355,10 @@ class ErrorEstimates(Sequence):
     def __len__(self) -> int:
         return self._E.shape[0]
 
+    def __iter__(self):
+        for e in range(self._E.shape[0]):
+            yield self[e]
+
     def __getitem__(self, e):
         if not isinstance(e, (int, np.integer)):
             raise TypeError("ErrorEstimates supports integer indices only")
