@@ -17,18 +17,15 @@ Run: ``python examples/kharlamova_orbits.py [--out DIR] [--quick]``.
 
 from __future__ import annotations
 
-import argparse
-import io
 from pathlib import Path
 
 import numpy as np
+from _common import command_line, save_figure  # examples/_common.py
 from matplotlib.figure import Figure
-from PIL import Image
 from scipy.interpolate import CubicSpline
 
 import liesuslov as ls
 
-FIGURES = Path(__file__).resolve().parent / "figures"
 NAME = "kharlamova_orbits.png"
 
 I = np.array([1.0, 2.0, 3.0, 4.0, 5.0])   # diagonal mass tensor, n = 5
@@ -167,23 +164,8 @@ def main(out_dir=None, quick: bool = False) -> Path:
     ax.text(0.02, 0.03, "near the saddle errors grow like its instability (the orbit passes it once per period)",
             transform=ax.transAxes, fontsize=8, color="0.3")
     fig.suptitle("Kharlamova case, SO(5): periodic and near-asymptotic motions")
-    return _save(fig, out_dir)
-
-
-def _save(fig: Figure, out_dir) -> Path:
-    """Write the figure as an 8-bit palette PNG (a third of the RGBA size) into ``out_dir``; return its path."""
-    out = Path(out_dir) if out_dir is not None else FIGURES
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / NAME
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    Image.open(buf).convert("RGB").quantize(256, dither=Image.Dither.NONE).save(path, optimize=True)
-    return path
+    return save_figure(fig, out_dir, NAME)
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=None, help=f"output folder (default {FIGURES})")
-    parser.add_argument("--quick", action="store_true", help="a coarse, fast run (for tests)")
-    args = parser.parse_args()
-    print(f"figure: {main(args.out, args.quick)}")
+    command_line(main, __doc__)

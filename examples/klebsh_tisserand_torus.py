@@ -16,18 +16,15 @@ Run: ``python examples/klebsh_tisserand_torus.py [--out DIR] [--quick]``.
 
 from __future__ import annotations
 
-import argparse
-import io
 from pathlib import Path
 
 import numpy as np
+from _common import command_line, save_figure  # examples/_common.py
 from matplotlib.figure import Figure
-from PIL import Image
 from scipy.interpolate import CubicSpline
 
 import liesuslov as ls
 
-FIGURES = Path(__file__).resolve().parent / "figures"
 NAME = "klebsh_tisserand_torus.png"
 
 I = np.array([1.0, 2.0, 3.0, 4.0])   # diagonal mass tensor
@@ -149,23 +146,8 @@ def main(out_dir=None, quick: bool = False) -> Path:
     ax.legend(fontsize=8)
     fig.suptitle(f"Klebsh–Tisserand case, SO(4): motion on an invariant torus "
                  rf"($\omega$ = {np.array2string(w, precision=3)} in $\tau$)")
-    return _save(fig, out_dir)
-
-
-def _save(fig: Figure, out_dir) -> Path:
-    """Write the figure as an 8-bit palette PNG (a third of the RGBA size) into ``out_dir``; return its path."""
-    out = Path(out_dir) if out_dir is not None else FIGURES
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / NAME
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    Image.open(buf).convert("RGB").quantize(256, dither=Image.Dither.NONE).save(path, optimize=True)
-    return path
+    return save_figure(fig, out_dir, NAME)
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=None, help=f"output folder (default {FIGURES})")
-    parser.add_argument("--quick", action="store_true", help="a coarse, fast run (for tests)")
-    args = parser.parse_args()
-    print(f"figure: {main(args.out, args.quick)}")
+    command_line(main, __doc__)

@@ -566,15 +566,16 @@ def _timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, float, int]:
     result = fn()
     best, count, total = math.inf, 0, 0.0
     enabled = gc.isenabled()
+    # As timeit: one collection before, none during the repeats. (A gc.collect() before every call
+    # walks every live object and leaves the CPU caches cold: ~0.4 ms added to each call of either
+    # library, which swamps short runs.)
+    gc.collect()
+    gc.disable()
     try:
         while count < repeats and (count == 0 or total < REPEAT_BUDGET_S):
-            gc.collect()
-            gc.disable()
             start = time.perf_counter()
             fn()
             dt = time.perf_counter() - start
-            if enabled:
-                gc.enable()
             best, total, count = min(best, dt), total + dt, count + 1
     finally:
         if enabled:
@@ -1308,8 +1309,10 @@ sweeps (atol = 10⁻² rtol for both libraries). scipy integrates the *embedded*
 side written by hand for each scene, as a user would.
 
 **Timing.** Wall time of the whole call (`ls.integrate` or `solve_ivp`), the minimum over repeats
-after one warm-up run (repeats stop once they add up to 0.6 s, at least one), garbage collection off
-while timing.
+after one warm-up run (repeats stop once they add up to 0.6 s, at least one); as in `timeit`, one
+garbage collection before the repeats and none during them. BLAS threads as the environment sets them
+(the numbers below were taken with `OPENBLAS_NUM_THREADS=1`: on a loaded 2-core machine a threaded BLAS
+makes small products erratic for both libraries).
 
 **Errors.** At the final time t1, where both libraries land exactly: the largest absolute component
 error of Ω (so(n) coordinates), of Γ, of g, and of the pendulum's (q, v); a run's *error* is the largest

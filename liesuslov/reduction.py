@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import as_float_array, check_positive
+from ._validation import as_float_array, check_positive, check_real
 from .algebra import Inertia, SpecialOrthogonalAlgebra, Subspace, so, suslov_distribution
 from .integrators import integrate
 from .mechanics import Case, SuslovSystem
@@ -92,16 +92,6 @@ def _tangent(q: np.ndarray, v: np.ndarray, name_q: str, name_v: str) -> np.ndarr
                          f"got |<{name_q}, {name_v}>| up to {np.max(np.abs(dot)):.3g}: pass "
                          f"{name_v} - <{name_q}, {name_v}> {name_q}")
     return v - dot[..., None] * q
-
-
-def _real(x: Any, name: str) -> float:
-    try:
-        val = float(x)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real number, got {type(x).__name__}") from exc
-    if not np.isfinite(val):
-        raise ValueError(f"{name} must be finite, got {x!r}")
-    return val
 
 
 def _dim_n(n: Any) -> int:
@@ -192,7 +182,7 @@ def pendulum_energy(q, v, m, B, gamma) -> np.ndarray:
     v = as_float_array(v, "v", ndim_min=1, tail=(n,))
     gam = as_float_array(gamma, "gamma", ndim_min=1, tail=(n,))
     m = check_positive(m, "m")
-    B = _real(B, "B")
+    B = check_real(B, "B")
     return 0.5 * m * np.sum(v * v, axis=-1) + B * np.sum(gam * q, axis=-1)
 
 
@@ -276,7 +266,7 @@ class SphericalPendulum:
     def __init__(self, n: int, m: float, B: float, gamma=None) -> None:
         self.n = _dim_n(n)
         self.m = check_positive(m, "m")
-        self.B = _real(B, "B")
+        self.B = check_real(B, "B")
         if gamma is None:
             gam = np.eye(self.n)[-1]
         else:

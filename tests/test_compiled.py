@@ -241,6 +241,17 @@ def test_auto_leaves_large_n_to_numpy(monkeypatch):
     assert ls.integrate(case.system, omega, backend="numba", **kw).stats["backend"] == "numba"
 
 
+def test_auto_leaves_large_batches_to_numpy(monkeypatch):
+    monkeypatch.setattr(compiled, "AUTO_MAX_BATCH", 2)
+    case = kt4()
+    omega, Gamma = case.random_state(0, batch=(3,))
+    kw = dict(t_span=(0.0, 0.1), Gamma0=Gamma, reconstruct=True, h=0.05)
+    a = ls.integrate(case.system, omega, **kw)
+    b = ls.integrate(case.system, omega, backend="numba", **kw)
+    assert a.stats["backend"] == "numpy" and b.stats["backend"] == "numba"
+    assert np.abs(a.g - b.g).max() < 1e-13
+
+
 def test_importing_liesuslov_does_not_import_numba():
     code = "import sys, liesuslov; assert 'numba' not in sys.modules, 'numba imported'"
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import re
+import sys
 from pathlib import Path
 
 import pytest
@@ -16,7 +17,9 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 def load(path: Path):
-    """Import an example by path (the examples are scripts, not a package)."""
+    """Import an example by path (the examples are scripts, not a package, sharing ``_common.py``)."""
+    if str(EXAMPLES) not in sys.path:
+        sys.path.insert(0, str(EXAMPLES))
     spec = importlib.util.spec_from_file_location(f"liesuslov_example_{path.stem}", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

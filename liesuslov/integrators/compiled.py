@@ -69,13 +69,16 @@ import numpy as np
 from .. import groups
 
 __all__ = ["CompiledStepper", "CompilePlan", "ErrorEstimates", "NotCompilable", "compile_plan", "numba_available",
-           "make_stepper", "AUTO_MAX_N"]
+           "make_stepper", "AUTO_MAX_N", "AUTO_MAX_BATCH"]
 
 MODES = {"none": 0, "gamma": 1, "g": 2}
 #: ``backend="auto"`` compiles a group part up to this n: the kernel's dense O(n^3) stage work (one
 #: trajectory at a time) loses to the numpy stepper's batched and low-rank kernels beyond it (measured:
 #: DOP853 weights, n = 24 at 0.6x the numpy time per step, n = 32 at 1.2x).
 AUTO_MAX_N = 24
+# Above this many trajectories the numpy stepper, vectorised along the batch, beats the kernel's
+# serial loop (measured, RKMK4 with reconstruction: crossover near 200 for n = 3 and n = 4).
+AUTO_MAX_BATCH = 200
 CHART_CODES = {"exp": 0, "cayley": 1}
 
 # Relative agreement the probed polynomial must reach against model.xi_dot on random points.
@@ -535,8 +538,8 @@ def make_stepper(backend: str, model, tableau, chart, mode: str, batch: int, *, 
     ----------
     backend : {"auto", "numba"}
         "auto": the compiled stepper when numba imports, the model qualifies and the group matrices are
-        at most :data:`AUTO_MAX_N` wide, else the numpy ``RKMKStepper``; "numba": the compiled one (any
-        n) or a ValueError saying why not.
+        at most :data:`AUTO_MAX_N` wide and the batch at most :data:`AUTO_MAX_BATCH`, else the numpy
+        ``RKMKStepper``; "numba": the compiled one (any n, any batch) or a ValueError saying why not.
     model, tableau, chart, mode, batch
         As for ``RKMKStepper``.
     rtol, atol : float, optional
@@ -549,6 +552,8 @@ def make_stepper(backend: str, model, tableau, chart, mode: str, batch: int, *, 
             raise NotCompilable("numba is not installed (pip install 'liesuslov[fast]')")
         if backend == "auto" and mode != "none" and model.n is not None and model.n > AUTO_MAX_N:
             raise NotCompilable(f"n = {model.n} > {AUTO_MAX_N}: the numpy stepper is faster there")
+        if backend == "auto" and batch > AUTO_MAX_BATCH:
+            raise NotCompilable(f"batch = {batch} > {AUTO_MAX_BATCH}: the vectorised numpy stepper is faster there")
         stepper = CompiledStepper(model, tableau, chart, mode, batch, rtol=rtol, atol=atol)
         _ensure_compiled(strict=backend == "numba")
         return stepper, "numba"

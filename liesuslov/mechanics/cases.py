@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float_array
+from .._validation import as_float_array, check_real
 from ..algebra import Inertia, so
 from .potentials import (
     FamilyPotential,
@@ -116,16 +116,6 @@ def _moments(J, name: str = "J") -> np.ndarray:
     return J
 
 
-def _real(value, name: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__}") from exc
-    if not np.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return v
-
-
 def _w(x):
     """so(3) coordinates to the paper's vector w = (-Omega_23, Omega_13, -Omega_12)."""
     return -x[..., 2], x[..., 1], -x[..., 0]
@@ -189,8 +179,8 @@ def lagrange3(J1, J3, B3) -> Case:
         raise ValueError(f"J1 must be a number or the pair (J1, J2), got {J12.shape[0]} values")
     if J12.shape[0] == 2 and J12[0] != J12[1]:
         raise ValueError(f"the Lagrange case needs J1 = J2, got J1 = {J12[0]}, J2 = {J12[1]}")
-    J = _moments([J12[0], J12[0], _real(J3, "J3")])
-    B3 = _real(B3, "B3")
+    J = _moments([J12[0], J12[0], check_real(J3, "J3")])
+    B3 = check_real(B3, "B3")
     system = _system3(J, LinearPotential([0.0, 0.0, B3]))
     j1 = J[0]
 
@@ -208,7 +198,7 @@ def kharlamova3(J, B1, B2) -> Case:
     (``E = E_1 + E_2``; from ``J2 w2' = B1 Gamma_3``, ``J1 w1' = -B2 Gamma_3``).
     """
     J = _moments(J)
-    B1, B2 = _real(B1, "B1"), _real(B2, "B2")
+    B1, B2 = check_real(B1, "B1"), check_real(B2, "B2")
     system = _system3(J, LinearPotential([B1, B2, 0.0]))
     J1, J2 = J[0], J[1]
 
@@ -234,7 +224,7 @@ def klebsh_tisserand3(J, eps) -> Case:
     (``2 F = J2 F_1 + J1 F_2 - eps J1 J2 |Gamma|^2``).
     """
     J = _moments(J)
-    eps = _real(eps, "eps")
+    eps = check_real(eps, "eps")
     system = _system3(J, QuadraticPotential(eps * J))
     J1, J2, J3 = J
     Adiag = eps * J1 * J2 * J3 / J
@@ -309,7 +299,7 @@ def gyroscopic3(J, eps, potential: Potential | None = None) -> Case:
       + b2 (J2 b2 - eps^2) Gamma_2^2 + 2 eps (J1 b1 w1 Gamma_1 + J2 b2 w2 Gamma_2)``.
     """
     J = _moments(J)
-    eps = _real(eps, "eps")
+    eps = check_real(eps, "eps")
     J1, J2 = J[0], J[1]
     if potential is None or isinstance(potential, ZeroPotential):
         system = _system3(J, None, eps)
@@ -391,7 +381,7 @@ def lagrange(n: int, I1, In, Bn) -> Case:
     if np.any(I1v != I1v[0]):
         raise ValueError(f"the Lagrange case needs I_1 = I_2 = ... = I_(n-1) (dynamical symmetry about e_n), "
                          f"got {I1v}")
-    i1, i_n, Bn = float(I1v[0]), _real(In, "In"), _real(Bn, "Bn")
+    i1, i_n, Bn = float(I1v[0]), check_real(In, "In"), check_real(Bn, "Bn")
     I = np.array([i1] * (n - 1) + [i_n])
     system = SuslovSystem(Inertia.from_mass_tensor(I), potential=LinearPotential(np.eye(n)[-1] * Bn))
     idx = _fk_index(n)
