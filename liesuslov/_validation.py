@@ -35,6 +35,8 @@ def as_float_array(x: Any, name: str, *, ndim_min: int = 0, tail: tuple[int, ...
     ValueError
         If the shape or the values are wrong.
     """
+    if x is None:  # np.asarray(None, dtype=float) would be a silent NaN
+        raise TypeError(f"{name} must be a real numeric array, got None")
     try:
         arr = np.asarray(x, dtype=float)
     except (TypeError, ValueError) as exc:

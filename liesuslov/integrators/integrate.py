@@ -73,7 +73,8 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     Gamma0 : array_like, shape (..., n), optional
         Initial vertical in the body frame (unit vectors). Required when the potential is not zero.
     g0 : array_like, shape (..., m, m), optional
-        Initial attitude (default the identity); implies nothing unless ``reconstruct=True``.
+        Initial attitude (default the identity); only with ``reconstruct=True`` (a ValueError
+        otherwise, since it would be ignored).
     reconstruct : bool
         Also integrate ``g^{-1} dg/dt = Omega`` on the group.
     method : str
@@ -125,6 +126,13 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     if not (isinstance(system, SuslovSystem) or is_model):
         raise TypeError(f"system must be a SuslovSystem (or a model such as system.model()), "
                         f"got {type(system).__name__}")
+    for name, value in (("method", method), ("chart", chart), ("backend", backend), ("form", form)):
+        if not isinstance(value, str):
+            raise TypeError(f"{name} must be a string, got {type(value).__name__}")
+    if not isinstance(reconstruct, (bool, np.bool_)):
+        raise TypeError(f"reconstruct must be True or False, got {type(reconstruct).__name__}")
+    if isinstance(h, (bool, np.bool_)):
+        raise TypeError("h must be a positive number (the step size), got a bool")
     if method not in METHODS:
         raise ValueError(f"method must be one of {sorted(METHODS)}, got {method!r}")
     if chart not in CHARTS:
@@ -153,6 +161,9 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         if Gamma0 is not None and not model.has_gamma:
             raise ValueError("Gamma0 was given but this model has no Gamma; build it with system.model(gamma=True)")
     else:
+        if Gamma0 is not None and not system.is_so:
+            raise ValueError(f"Gamma0 must be None on {system.algebra.name}: the vertical Gamma exists only for a "
+                             "body in SO(n)")
         model = system.model(gamma=True if Gamma0 is not None else None, form=form)
     alg = model.algebra
     if model.has_gamma and Gamma0 is None:
@@ -172,9 +183,10 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     if model.has_gamma:
         G0 = as_float_array(Gamma0, "Gamma0", ndim_min=1, tail=(m,))
         norms = np.linalg.norm(G0, axis=-1)
-        if np.any(np.abs(norms - 1.0) > 1e-8):
-            raise ValueError(f"Gamma0 must be a unit vector (|Gamma0| = 1); got norms in "
-                             f"[{norms.min():.6g}, {norms.max():.6g}]: pass Gamma0 / |Gamma0|")
+        dev = float(np.max(np.abs(norms - 1.0))) if norms.size else 0.0
+        if dev > 1e-8:
+            raise ValueError(f"Gamma0 must be a unit vector (|Gamma0| = 1 to 1e-8); the largest deviation "
+                             f"| |Gamma0| - 1 | is {dev:.3g}: pass Gamma0 / |Gamma0|")
         G0 = G0 / norms[..., None]
         shapes.append(G0.shape[:-1])
     g_init = None
@@ -195,6 +207,9 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     except ValueError as exc:
         raise ValueError(f"the batch axes of Omega0, Gamma0 and g0 do not broadcast: {shapes}") from exc
     B = int(np.prod(batch_shape))
+    if B == 0:
+        raise ValueError(f"the batch of initial data is empty (batch shape {batch_shape}); pass at least one "
+                         "Omega0")
     xi = model.xi_from_coords(np.broadcast_to(x0, batch_shape + x0.shape[-1:]).reshape(B, -1))
     xi = np.ascontiguousarray(xi, dtype=float)
     if reconstruct:
@@ -548,8 +563,8 @@ def _omega_coords(alg, Omega0) -> np.ndarray:
         if d != m:  # so(3) is the only case where (3, 3) could also be three coordinate vectors
             raise ValueError("Omega0 given as a matrix must be skew-symmetric")
     if O.shape[-1] != d:
-        raise ValueError(f"Omega0 must have shape (..., {d}) (coordinates) "
-                         + (f"or (..., {m}, {m}) (a skew matrix)" if alg.name.startswith("so(") else "")
+        raise ValueError(f"Omega0 must have shape (..., {d}) (coordinates)"
+                         + (f" or (..., {m}, {m}) (a skew matrix)" if alg.name.startswith("so(") else "")
                          + f", got {O.shape}")
     return O
 

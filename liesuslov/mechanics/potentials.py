@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_float_array, check_symmetric
+from .._validation import as_float_array
 
 __all__ = ["Potential", "ZeroPotential", "LinearPotential", "QuadraticPotential", "FamilyPotential",
            "GradientCheck", "check_gradient"]
@@ -141,7 +141,8 @@ class QuadraticPotential(Potential):
     Parameters
     ----------
     B : array_like, shape (n,) or (n, n)
-        A vector means ``diag(B)``: ``V = 1/2 sum_i B_i Gamma_i^2``; a matrix must be symmetric.
+        A vector means ``diag(B)``: ``V = 1/2 sum_i B_i Gamma_i^2``; a matrix is used through its symmetric
+        part ``(B + B^T)/2`` (the only part V sees), which is stored as ``matrix``.
 
     Attributes
     ----------
@@ -157,10 +158,9 @@ class QuadraticPotential(Potential):
         if B.ndim == 1 and B.shape[0] >= 2:
             S = np.diag(B)
         elif B.ndim == 2 and B.shape[0] == B.shape[1] and B.shape[0] >= 2:
-            check_symmetric(B, "B")
-            S = 0.5 * (B + B.T)
+            S = 0.5 * (B + B.T)  # 1/2 G^T B G only sees the symmetric part of B
         else:
-            raise ValueError(f"B must have shape (n,) (diagonal) or (n, n) (symmetric) with n >= 2, "
+            raise ValueError(f"B must have shape (n,) (diagonal) or (n, n) with n >= 2, "
                              f"got shape {B.shape}")
         S.setflags(write=False)
         self.matrix = S
