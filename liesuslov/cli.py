@@ -421,11 +421,8 @@ def _check_reduction(scene, tol: float) -> list[str]:
         lagrange_parameters(scene.system)
     except (ValueError, TypeError):
         return []
-    import inspect
 
-    extra = {}
-    if scene.backend is not None and "backend" in inspect.signature(check_lagrange_reduction).parameters:
-        extra["backend"] = scene.backend
+    extra = {"backend": scene.backend} if scene.backend is not None else {}
     try:
         r = check_lagrange_reduction(scene.system, scene.omega0, scene.Gamma0, scene.t_span, g0=scene.g0,
                                      method=scene.method, rtol=scene.rtol, atol=scene.atol,

@@ -806,7 +806,7 @@ def _plane_distance(q: np.ndarray, span: np.ndarray) -> float:
 def check_lagrange_reduction(system_or_case, Omega0, Gamma0, t_span, g0=None, method: str = "rkmk853",
                              rtol: float = 1e-12, atol: float = 1e-12, t_eval=None,
                              pendulum_method: str | None = None, *, h: float | None = None,
-                             chart: str = "exp") -> ReductionCheck:
+                             chart: str = "exp", backend: str = "auto") -> ReductionCheck:
     """Integrate a Lagrange scene and the spherical pendulum independently, and compare them.
 
     1. Check that the scene is the Lagrange case (:func:`lagrange_parameters`).
@@ -841,6 +841,8 @@ def check_lagrange_reduction(system_or_case, Omega0, Gamma0, t_span, g0=None, me
         Step of fixed-step methods (both integrations).
     chart : {"exp", "cayley"}
         Chart of both integrations.
+    backend : {"auto", "numpy", "numba"}
+        Backend of both integrations (see :func:`liesuslov.integrate`).
 
     Returns
     -------
@@ -896,7 +898,7 @@ def check_lagrange_reduction(system_or_case, Omega0, Gamma0, t_span, g0=None, me
     q0 = np.broadcast_to(q0, shape + (n,))
     v0 = np.broadcast_to(v0, shape + (n,))
 
-    common = {"rtol": rtol, "atol": atol, "chart": chart}
+    common = {"rtol": rtol, "atol": atol, "chart": chart, "backend": backend}
     if h is not None:
         common["h"] = h
     sus = integrate(system, x0, t_span, Gamma0=G0, g0=gi, reconstruct=True, method=method, t_eval=t_eval,
