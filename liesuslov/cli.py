@@ -53,6 +53,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     try:
         return int(args.func(args))
+    except BrokenPipeError:  # `liesuslov run | head`: the reader left; stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
     except (_UserError, ValueError, TypeError, OSError) as exc:
         if getattr(args, "debug", False):
             raise
@@ -484,10 +488,10 @@ def _print_case(entry) -> None:
 
     case = entry.build()
     doc = inspect.getdoc(entry.constructor) or ""
-    print(f"{entry.name}: {entry.description}\n")
-    print(doc)
-    print(f"\nfirst integrals: {', '.join(case.integrals)}")
-    print(f"model: {case.system.model().description()}\n")
+    # Everything but the scene itself is a TOML comment, so `liesuslov cases NAME > scene.toml` runs as is.
+    prose = [f"{entry.name}: {entry.description}", "", *doc.splitlines(), "",
+             f"first integrals: {', '.join(case.integrals)}", f"model: {case.system.model().description()}", ""]
+    print("\n".join(f"# {line}".rstrip() for line in prose))
     params: dict[str, Any] = {}
     skipped = []
     for k, v in entry.example.items():

@@ -102,7 +102,7 @@ atol = 1e-12
 n_out = 501                        # output times, evenly spaced
 reconstruct = true                 # also integrate g in SO(4); then Gamma = g^T gamma
 backend = "numpy"                  # "auto" uses the compiled kernel (liesuslov[fast]) when installed: worth
-                                   # it for long runs and large batches; its first use compiles it (20-60 s)
+                                   # it for long single-trajectory runs; its first use compiles it (about 12 s, once)
 
 [output]
 name = "Klebsh–Tisserand, n = 4"
@@ -648,7 +648,7 @@ def _potential_of(parent: _Table, key: str, value: Any, n: int | None):
     if kind == "linear":
         B = t.array("B", [(n,)], f"a list of {n} numbers (B_1, ..., B_{n}): V = sum_i B_i Gamma_i")
         return _wrap(t, "B", lambda: LinearPotential(B))
-    B = t.array("B", [(n,), (n, n)], f"a list of {n} numbers (V = 1/2 sum_i B_i Gamma_i^2) or a symmetric "
+    B = t.array("B", [(n,), (n, n)], f"a list of {n} numbers (V = 1/2 sum_i B_i Gamma_i^2) or an "
                                      f"{n}×{n} matrix (V = 1/2 Gamma^T B Gamma)")
     return _wrap(t, "B", lambda: QuadraticPotential(B))
 

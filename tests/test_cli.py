@@ -74,8 +74,8 @@ def test_cases_table(capsys):
 def test_case_template_is_a_runnable_scene(name, capsys):
     assert cli.main(["cases", name]) == 0
     text = capsys.readouterr().out
-    template = text[text.index("# a scene for this case"):]
-    scene = scene_from_text(template, source="template").with_options(t_end=0.5)
+    assert text.startswith(f"# {name}: ")  # the whole output is a scene file (prose as comments)
+    scene = scene_from_text(text, source="template").with_options(t_end=0.5)
     assert scene.case.name == name and scene.run().success
 
 

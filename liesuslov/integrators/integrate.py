@@ -483,9 +483,12 @@ class _Run:
         d0 = np.sqrt(np.mean((y0 / scale) ** 2))
         d1 = np.sqrt(np.mean((f0 / scale) ** 2))
         h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-        xi1, G1, _, _ = st.step(self.direction * h0, self.xi, self.G, self.gamma)  # a cheap Euler-like probe
-        st.reset()
-        L1 = self.model.xi_dot(xi1, st.gamma_of(G1, self.gamma))
+        # An explicit Euler probe (no stage of the method): xi + h f, Gamma - h Omega Gamma (dGamma/dt = -Omega
+        # Gamma); only the change of the field matters here, not the structure of the probe point.
+        hp = self.direction * h0
+        xi1 = self.xi + hp * L0
+        Gam1 = None if Gam is None else Gam - hp * np.einsum("bij,bj->bi", Om, Gam)
+        L1 = self.model.xi_dot(xi1, Gam1)
         st.nfev += 1
         if self.mode != "none":
             f1 = np.concatenate([L1.reshape(-1), self.model.omega_matrix(xi1).reshape(-1)])
