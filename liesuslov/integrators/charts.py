@@ -460,17 +460,15 @@ class _CoordsKernel(_Kernel):
         return (flat.reshape(self.B, self.d) @ self.E).reshape(self.shape)
 
 
-class _So3Kernel(_Kernel):
-    """so(3): rotation vectors ``w`` (component-major rows of length B), closed forms by components.
+class _ComponentKernel(_Kernel):
+    """Kernels that hold each stage value as ``q`` components, component-major (rows of length B).
 
-    A single trajectory (B = 1) runs the chart on Python floats; a batch on contiguous 1-D arrays.
+    ``R`` (k, q) maps reduced coordinates to the components. A single trajectory (B = 1) runs the
+    chart on Python floats; a batch on contiguous 1-D arrays.
     """
 
-    q = 3
-
-    def __init__(self, chart: Chart, model, B: int, slots: int, need_act: bool) -> None:
-        W = _omega_basis(model, 3)
-        self.R = np.ascontiguousarray(W[:, [7, 2, 3]])  # w = (X21, X02, X10) of each basis element
+    def _setup(self, chart: Chart, R: np.ndarray, B: int, need_act: bool) -> None:
+        self.R = np.ascontiguousarray(R)
         self.RT = np.ascontiguousarray(self.R.T)
         self.B, self.single = B, B == 1
         self.exp = chart.name == "exp"
@@ -478,7 +476,7 @@ class _So3Kernel(_Kernel):
         self.v = None
 
     def slot(self, flat: np.ndarray) -> np.ndarray:
-        return flat if self.single else flat.reshape(3, self.B)
+        return flat if self.single else flat.reshape(self.q, self.B)
 
     def begin(self, G: np.ndarray, gamma: np.ndarray | None, mode: str) -> np.ndarray | None:
         Gam0, self.v = _vertical_components(G, gamma, mode, self.single)
@@ -487,10 +485,20 @@ class _So3Kernel(_Kernel):
     def omega(self, i: int, Xi: np.ndarray):
         if self.single:
             return (Xi @ self.R).ravel().tolist()
-        return np.matmul(self.RT, Xi.T)  # (3, B), contiguous rows
+        return np.matmul(self.RT, Xi.T)  # (q, B), contiguous rows
 
     def first(self, om, slot: np.ndarray) -> None:
         slot[...] = om
+
+
+class _So3Kernel(_ComponentKernel):
+    """so(3): rotation vectors ``w``, closed forms by components."""
+
+    q = 3
+
+    def __init__(self, chart: Chart, model, B: int, slots: int, need_act: bool) -> None:
+        # w = (X21, X02, X10) of each basis element
+        self._setup(chart, _omega_basis(model, 3)[:, [7, 2, 3]], B, need_act)
 
     def load(self, flat: np.ndarray):
         w = tuple(flat.tolist()) if self.single else tuple(flat.reshape(3, self.B))
@@ -533,7 +541,7 @@ class _So3Kernel(_Kernel):
         return np.stack((z, -w2, w1, w2, z, -w0, -w1, w0, z), -1).reshape(self.B, 3, 3)
 
 
-class _So4Kernel(_Kernel):
+class _So4Kernel(_ComponentKernel):
     """so(4) = so(3) ⊕ so(3): the pair ``(p, q)`` (component-major), closed forms by components."""
 
     q = 6
@@ -544,28 +552,8 @@ class _So4Kernel(_Kernel):
         T = np.zeros((16, 6))
         for col, (i, j, sgn) in enumerate(((1, 11, 1), (2, 7, -1), (3, 6, 1), (1, 11, -1), (2, 7, 1), (3, 6, -1))):
             T[i, col], T[j, col] = 0.5, 0.5 * sgn
-        self.R = np.ascontiguousarray(W @ T)
-        self.RT = np.ascontiguousarray(self.R.T)
-        self.B, self.single = B, B == 1
-        self.exp = chart.name == "exp"
-        self.need_act = need_act
+        self._setup(chart, W @ T, B, need_act)
         self.half, self.poly = _dexpinv_so3_series(chart.terms)
-        self.v = None
-
-    def slot(self, flat: np.ndarray) -> np.ndarray:
-        return flat if self.single else flat.reshape(6, self.B)
-
-    def begin(self, G: np.ndarray, gamma: np.ndarray | None, mode: str) -> np.ndarray | None:
-        Gam0, self.v = _vertical_components(G, gamma, mode, self.single)
-        return Gam0
-
-    def omega(self, i: int, Xi: np.ndarray):
-        if self.single:
-            return (Xi @ self.R).ravel().tolist()
-        return np.matmul(self.RT, Xi.T)  # (6, B)
-
-    def first(self, om, slot: np.ndarray) -> None:
-        slot[...] = om
 
     def load(self, flat: np.ndarray):
         c = flat.tolist() if self.single else tuple(flat.reshape(6, self.B))
