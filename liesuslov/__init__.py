@@ -55,6 +55,19 @@ from .scene import Scene, load_scene
 
 __version__ = "0.1.0"
 
+# Research tools and ensembles load on first use (``import liesuslov`` stays light).
+_LAZY = {"poincare_section": ".research", "reconstruction_phase": ".research", "lyapunov_exponent": ".research",
+         "ReconstructionPhase": ".research", "ensemble": ".ensemble", "open_ensemble": ".ensemble",
+         "Ensemble": ".ensemble", "EventRecord": ".integrators"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 __all__ = ["LieAlgebra", "se", "so", "SpecialOrthogonalAlgebra", "wedge", "pairing", "hat3", "vee3",
            "Subspace", "is_symmetric_pair", "suslov_distribution", "Inertia",
            "Potential", "LinearPotential", "QuadraticPotential", "FamilyPotential", "ZeroPotential",
@@ -62,4 +75,6 @@ __all__ = ["LieAlgebra", "se", "so", "SpecialOrthogonalAlgebra", "wedge", "pairi
            "cases", "integrate", "METHODS", "Solution", "interop", "analytic",
            "to_spherical_pendulum", "pendulum_energy", "pendulum_momentum", "momentum_map", "lift",
            "SphericalPendulum", "integrate_pendulum", "PendulumSolution", "LagrangeParameters",
-           "lagrange_parameters", "ReductionCheck", "check_lagrange_reduction", "Scene", "load_scene", "__version__"]
+           "lagrange_parameters", "ReductionCheck", "check_lagrange_reduction", "Scene", "load_scene", "__version__",
+           "poincare_section", "reconstruction_phase", "lyapunov_exponent", "ReconstructionPhase", "ensemble",
+           "open_ensemble", "Ensemble", "EventRecord"]
