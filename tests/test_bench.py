@@ -131,7 +131,7 @@ def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch):
 
     def fail(*args, **kwargs):
         raise OSError("disk full")
-    monkeypatch.setattr(bench, "_summary_sections", fail)
+    monkeypatch.setattr(bench.tables, "summary_sections", fail)
     with pytest.raises(OSError, match="disk full"):
         bench.run_bench(tmp_path, config=cfg, progress=False, docs=tmp_path / "performance.md")
     assert list(tmp_path.iterdir()) == []
