@@ -7,7 +7,7 @@ carries the spherical pendulum of mass ``m = I_1 + I_n``: ``q = g e_n`` (the sym
 
 For n = 3 and n = 5 the body is integrated with reconstruction (RKMK, DOP853 tableau) and mapped by
 ``ls.to_spherical_pendulum``; ``ls.integrate_pendulum`` integrates the pendulum independently from the
-mapped initial point, and ``ls.analytic.SphericalPendulum`` gives it by Jacobi elliptic functions
+mapped initial point, and ``ls.analytic.SphericalPendulumMotion`` gives it by Jacobi elliptic functions
 (``ls.check_lagrange_reduction`` packages the first comparison). The figure shows the two curves
 ``q(t)`` seen from above (projected on the horizontal plane of the invariant 3-space
 ``span{gamma, q0, v0}``) and their distance over time; ``|Phi|`` (``ls.momentum_map``) stays 0.
@@ -61,7 +61,7 @@ def run(n: int, t_end: float, npts: int, rtol: float, backend: str = "auto") -> 
     q0, v0 = ls.to_spherical_pendulum(np.eye(n), Om0)
     pend = ls.SphericalPendulum(n, I1 + IN, BN, gamma)
     psol = ls.integrate_pendulum(pend, q0, v0, (0.0, t_end), **opts)
-    exact = ls.analytic.SphericalPendulum(q0, v0, gamma=gamma, mass=I1 + IN, B=BN)
+    exact = ls.analytic.SphericalPendulumMotion(q0, v0, gamma=gamma, mass=I1 + IN, B=BN)
     qa, _ = exact.state(t)
     E = system.energy(sus.omega, sus.Gamma)
     # measured height period: successive upward zeros of dz/dt, z = <gamma, q>

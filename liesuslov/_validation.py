@@ -37,6 +37,10 @@ def as_float_array(x: Any, name: str, *, ndim_min: int = 0, tail: tuple[int, ...
     """
     if x is None:  # np.asarray(None, dtype=float) would be a silent NaN
         raise TypeError(f"{name} must be a real numeric array, got None")
+    # float(complex) would drop the imaginary part with only a warning: a complex value is a wrong type
+    if np.iscomplexobj(x) or (isinstance(x, (list, tuple)) and _has_complex(x)):
+        raise TypeError(f"{name} must be real, got complex values; pass the real part explicitly "
+                        f"(np.real({name})) if the imaginary part is rounding noise")
     try:
         arr = np.asarray(x, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -52,8 +56,16 @@ def as_float_array(x: Any, name: str, *, ndim_min: int = 0, tail: tuple[int, ...
     return arr
 
 
+def _has_complex(x: Any) -> bool:
+    """True iff a (nested) list or tuple holds a complex number or complex array."""
+    return any(_has_complex(e) if isinstance(e, (list, tuple)) else
+               (isinstance(e, complex) or np.iscomplexobj(e)) for e in x)
+
+
 def check_real(x: Any, name: str) -> float:
     """Return ``x`` as a float after checking it is a finite real number."""
+    if np.iscomplexobj(x):
+        raise TypeError(f"{name} must be a real number, got the complex {x!r}")
     try:
         val = float(x)
     except (TypeError, ValueError) as exc:
@@ -80,3 +92,35 @@ def check_symmetric(M: np.ndarray, name: str, *, rtol: float = 1e-10) -> None:
     if asym > rtol * scale:
         raise ValueError(f"{name} must be symmetric: max |M - M^T| = {asym:.3g} "
                          f"(relative {asym / scale:.3g}); pass (M + M.T) / 2 if that is what you mean")
+
+
+def check_rotations(g: np.ndarray, name: str, *, tol: float = 1e-8) -> None:
+    """Raise ``ValueError`` unless every ``g`` (..., k, k) is in SO(k): ``max |g^T g - I| <= tol``, ``det g > 0``.
+
+    The one rotation check of the package (attitudes ``g0``, fibres, scene files); an empty batch passes.
+    """
+    k = g.shape[-1]
+    if g.ndim < 2 or g.shape[-2] != k:
+        raise ValueError(f"{name} must be square rotation matrices (..., k, k), got shape {g.shape}")
+    if g.size == 0:
+        return
+    err = float(np.max(np.abs(np.swapaxes(g, -1, -2) @ g - np.eye(k))))
+    if not err <= tol:  # also catches NaN
+        raise ValueError(f"{name} must be in SO({k}): max |{name}^T {name} - I| = {err:.3g} > {tol:g}; "
+                         "pass an orthogonal matrix (e.g. the Q factor of a QR decomposition)")
+    if np.any(np.linalg.det(g) < 0):
+        raise ValueError(f"{name} must be in SO({k}): some {name} have det = -1 (reflections); "
+                         "flip the sign of one column")
+
+
+def unit_vectors(x: np.ndarray, name: str, *, tol: float = 1e-8) -> np.ndarray:
+    """``x / |x|`` (..., n) after checking ``| |x| - 1 | <= tol`` for every vector (the one unit check).
+
+    The division removes the rounding of the given data, so unit vectors stay unit to 1e-16.
+    """
+    nrm = np.linalg.norm(x, axis=-1)
+    if x.size and not np.all(np.abs(nrm - 1.0) <= tol):
+        raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got norms in "
+                         f"[{nrm.min():.6g}, {nrm.max():.6g}]: pass {name} / |{name}|")
+    return x / nrm[..., None]
+

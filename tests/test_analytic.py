@@ -13,7 +13,7 @@ from scipy.integrate import quad, solve_ivp
 from liesuslov.analytic import (
     KharlamovaMotion,
     KlebshTisserandMotion,
-    SphericalPendulum,
+    SphericalPendulumMotion,
     Suslov3Free,
     family3_integral,
     gyroscopic3_free_integrals,
@@ -122,7 +122,7 @@ def test_pendulum_state_matches_ode(n):
     v0 = 1.2 * tangent(rng, q0)
     ts = np.array([0.0, 0.4, 1.7, 4.0, -2.5])
     for mass, B in [(1.3, 2.0), (0.8, -1.5), (1.0, 0.0)]:
-        p = SphericalPendulum(q0, v0, gamma, mass, B)
+        p = SphericalPendulumMotion(q0, v0, gamma, mass, B)
         q, v = p.state(ts)
         assert q.shape == v.shape == (5, 3, n)
         for b in range(3):
@@ -138,7 +138,7 @@ def test_pendulum_cubic_roots_and_batch_shapes():
     gamma = unit(rng.normal(size=n))
     q0 = unit(rng.normal(size=(2, 3, n)))
     v0 = tangent(rng, q0)
-    p = SphericalPendulum(q0, v0, gamma, 1.5, -2.0)
+    p = SphericalPendulumMotion(q0, v0, gamma, 1.5, -2.0)
     assert p.roots.shape == (2, 3, 3) and p.cubic.shape == (2, 3, 4) and p.height_period.shape == (2, 3)
     z0 = q0 @ gamma
     lo, hi = p.height_range[..., 0], p.height_range[..., 1]
@@ -161,7 +161,7 @@ def test_pendulum_height_period_and_precession():
              (np.array([0.0, 0.8, 0.6]), np.array([-1.4, 0.3, -0.4]), 2.0, -1.0)]
     for q0, v0, mass, B in cases:
         v0 = v0 - (v0 @ q0) * q0
-        p = SphericalPendulum(q0, v0, gamma, mass, B)
+        p = SphericalPendulumMotion(q0, v0, gamma, mass, B)
         T = float(p.height_period)
         ts = np.linspace(0.0, T, 4001)
         y = dop(pendulum_rhs(3, mass, B, gamma), np.concatenate([q0, v0]), ts)
@@ -192,7 +192,7 @@ def test_pendulum_degenerate_cases():
     q0 = np.array([d[0] for d in data])
     v0 = np.array([d[1] for d in data])
     mass, B = 1.0, -2.0 * 1.0     # B < 0: the stable equilibrium is q = +gamma
-    p = SphericalPendulum(q0, v0, gamma, mass, B)
+    p = SphericalPendulumMotion(q0, v0, gamma, mass, B)
     assert np.all(p.planar)
     q, v = p.state(ts)
     for b in range(len(data)):
@@ -204,7 +204,7 @@ def test_pendulum_degenerate_cases():
     np.testing.assert_allclose(p.precession[:2], np.pi)
     # a tiny angular momentum about gamma: the general formula, continuous with the planar one
     pert = 1e-9 * unit(tangent(rng, q0[1]) - (tangent(rng, q0[1]) @ gamma) * gamma)
-    p2 = SphericalPendulum(q0[1], v0[1] + pert - (pert @ q0[1]) * q0[1], gamma, mass, B)
+    p2 = SphericalPendulumMotion(q0[1], v0[1] + pert - (pert @ q0[1]) * q0[1], gamma, mass, B)
     assert not p2.planar
     np.testing.assert_allclose(p2.state(ts)[0], q[:, 1], atol=1e-8)
     np.testing.assert_allclose(p2.precession, np.pi, atol=1e-7)
@@ -218,7 +218,7 @@ def test_pendulum_circular_orbit():
     q0 = np.array([np.sqrt(1 - z0 ** 2), 0.0, z0])
     for scale in (1.0, 1.0 + 1e-9, 1.0 + 1e-4):
         v0 = np.array([0.0, speed * scale, 0.0])
-        p = SphericalPendulum(q0, v0, gamma, 1.0, beta)
+        p = SphericalPendulumMotion(q0, v0, gamma, 1.0, beta)
         ts = np.linspace(0.0, 6.0, 5)
         ref = dop(pendulum_rhs(3, 1.0, beta, gamma), np.concatenate([q0, v0]), ts)
         np.testing.assert_allclose(p.state(ts)[0], ref[:, :3], atol=TOL)
@@ -241,7 +241,7 @@ def test_pendulum_near_separatrix_period():
     # (a) planar, released from rest at angle alpha from the top: m1 = sin^2(alpha/2)
     m1 = 2e-8
     alpha = 2.0 * np.arcsin(np.sqrt(m1))
-    p = SphericalPendulum([np.sin(alpha), 0.0, np.cos(alpha)], np.zeros(3), gamma, mass, beta * mass)
+    p = SphericalPendulumMotion([np.sin(alpha), 0.0, np.cos(alpha)], np.zeros(3), gamma, mass, beta * mass)
     np.testing.assert_allclose(p.complementary_parameter, m1, rtol=1e-13)
     np.testing.assert_allclose(p.height_period, 2.0 * _k_careful(m1) / np.sqrt(beta), rtol=1e-12)
     # (b) spatial: prescribe z2 = 1 - a (start there), z3 = 1 + c; then 1 + z1 = a c/(2 - a + c),
@@ -252,7 +252,7 @@ def test_pendulum_near_separatrix_period():
     l2 = 2.0 * beta * (2.0 - opz1) * a * c
     rho0 = np.sqrt(a * (2.0 - a))
     q0, v0 = np.array([rho0, 0.0, z2]), np.array([0.0, np.sqrt(l2) / rho0, 0.0])
-    p = SphericalPendulum(q0, v0, gamma, mass, beta * mass)
+    p = SphericalPendulumMotion(q0, v0, gamma, mass, beta * mass)
     assert not p.planar
     m1 = (a + c) / (z3 - z1)
     np.testing.assert_allclose(p.complementary_parameter, m1, rtol=1e-12)
@@ -289,7 +289,7 @@ def test_lagrange_case_reduces_to_the_pendulum():
     q_ref = g[:, :, -1]
     Om0 = np.zeros((n, n))
     Om0[:-1, -1], Om0[-1, :-1] = u0, -u0
-    p = SphericalPendulum(g0[:, -1], g0 @ Om0[:, -1], gamma, I1 + In, Bn)
+    p = SphericalPendulumMotion(g0[:, -1], g0 @ Om0[:, -1], gamma, I1 + In, Bn)
     q, _ = p.state(ts)
     np.testing.assert_allclose(q, q_ref, atol=TOL)
     np.testing.assert_allclose(q @ gamma, y[:, 2 * n - 2], atol=TOL)    # Gamma_n = <gamma, q>
@@ -713,14 +713,14 @@ def test_validation_errors():
     g3 = np.array([0.0, 0.0, 1.0])
     q, v = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
     bad = [
-        (lambda: SphericalPendulum([1.0, 0.1, 0.0], v, g3, 1.0, 1.0), "q0 must be a unit vector"),
-        (lambda: SphericalPendulum(q, [0.1, 1.0, 0.0], g3, 1.0, 1.0), "tangent"),
-        (lambda: SphericalPendulum(q, v, [0.0, 0.0, 2.0], 1.0, 1.0), "gamma must be a unit vector"),
-        (lambda: SphericalPendulum(q, v, g3, 0.0, 1.0), "mass"),
-        (lambda: SphericalPendulum(q[:2], v[:2], g3, 1.0, 1.0), "q0 must have shape"),
-        (lambda: SphericalPendulum(q, v, [[0.0, 0.0, 1.0]], 1.0, 1.0), "gamma"),
-        (lambda: SphericalPendulum(q, [np.nan, 1.0, 0.0], g3, 1.0, 1.0), "NaN"),
-        (lambda: SphericalPendulum(np.tile(q, (2, 1)), np.tile(v, (3, 1)), g3, 1.0, 1.0), "broadcast"),
+        (lambda: SphericalPendulumMotion([1.0, 0.1, 0.0], v, g3, 1.0, 1.0), "q0 must be a unit vector"),
+        (lambda: SphericalPendulumMotion(q, [0.1, 1.0, 0.0], g3, 1.0, 1.0), "tangent"),
+        (lambda: SphericalPendulumMotion(q, v, [0.0, 0.0, 2.0], 1.0, 1.0), "gamma must be a unit vector"),
+        (lambda: SphericalPendulumMotion(q, v, g3, 0.0, 1.0), "mass"),
+        (lambda: SphericalPendulumMotion(q[:2], v[:2], g3, 1.0, 1.0), "q0 must have shape"),
+        (lambda: SphericalPendulumMotion(q, v, [[0.0, 0.0, 1.0]], 1.0, 1.0), "gamma"),
+        (lambda: SphericalPendulumMotion(q, [np.nan, 1.0, 0.0], g3, 1.0, 1.0), "NaN"),
+        (lambda: SphericalPendulumMotion(np.tile(q, (2, 1)), np.tile(v, (3, 1)), g3, 1.0, 1.0), "broadcast"),
     ]
     I, B = np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.5])
     u0, G0 = np.array([0.1, 0.2]), unit([0.3, 0.4, 0.5])

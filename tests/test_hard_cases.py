@@ -29,7 +29,8 @@ import pytest
 
 import liesuslov as ls
 from liesuslov import groups
-from liesuslov.analytic import KharlamovaMotion, KlebshTisserandMotion, SphericalPendulum
+from liesuslov.analytic import KharlamovaMotion, KlebshTisserandMotion
+from liesuslov.analytic import SphericalPendulumMotion as SphericalPendulum
 
 EPS = np.finfo(float).eps
 

@@ -3,7 +3,7 @@
 Depends on numpy and scipy only. Every reference is batched over its initial data (leading axes)
 and over the evaluation times; state arrays put the time axes first, then the batch axes.
 
-* :class:`SphericalPendulum` — the ``SO(n-1)`` reduction of the n-D Lagrange case, by Jacobi
+* :class:`SphericalPendulumMotion` — the ``SO(n-1)`` reduction of the n-D Lagrange case, by Jacobi
   elliptic functions (height, period, precession, full state in any dimension).
 * :class:`KharlamovaMotion` and the coordinates (4.6), the quartic ``P4``, the integrals ``F_ij``.
 * :class:`KlebshTisserandMotion` — the motion on the invariant tori in ``tau`` and in ``t``; the
@@ -15,6 +15,7 @@ and over the evaluation times; state arrays put the time axes first, then the ba
 The paper's misprints found while deriving these are listed in ``docs/errata.md``.
 """
 
+from .euler_top import EulerTop
 from .integrals3d import (
                           family3_integral,
                           gyroscopic3_free_integrals,
@@ -40,7 +41,7 @@ from .klebsh_tisserand import (
                           klebsh_tisserand_integrals,
                           klebsh_tisserand_two_tori,
 )
-from .pendulum import SphericalPendulum
+from .pendulum import SphericalPendulumMotion
 from .suslov import (
                           Suslov3Free,
                           suslov3_asymptotic_points,
@@ -53,7 +54,7 @@ from .suslov import (
 )
 
 __all__ = [
-    "SphericalPendulum",
+    "SphericalPendulumMotion", "EulerTop",
     "KharlamovaMotion", "kharlamova_coordinates", "kharlamova_from_coordinates", "kharlamova_integrals",
     "kharlamova_partial_energies", "kharlamova_quartic",
     "KlebshTisserandMotion", "klebsh_tisserand_angles", "klebsh_tisserand_energy",
@@ -64,3 +65,17 @@ __all__ = [
     "gyroscopic3_quadratic_integral", "kharlamova3_integral", "klebsh_tisserand3_integral",
     "lagrange3_integral",
 ]
+
+
+def __getattr__(name: str):
+    # The closed form was called SphericalPendulum, the name of the pendulum *system* of
+    # liesuslov.reduction (ls.SphericalPendulum): one name, one meaning, so it is SphericalPendulumMotion
+    # (like KharlamovaMotion); the old name keeps working with a warning.
+    if name == "SphericalPendulum":
+        import warnings
+
+        warnings.warn("liesuslov.analytic.SphericalPendulum is now SphericalPendulumMotion (the closed-form "
+                      "motion); ls.SphericalPendulum is the pendulum system of liesuslov.reduction",
+                      DeprecationWarning, stacklevel=2)
+        return SphericalPendulumMotion
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

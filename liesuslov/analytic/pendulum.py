@@ -61,7 +61,7 @@ import numpy as np
 from . import _checks as C
 from ._elliptic import amplitude_pi, complete_k, complete_pi_any, incomplete_f, jacobi, real_cubic_roots
 
-__all__ = ["SphericalPendulum"]
+__all__ = ["SphericalPendulumMotion"]
 
 #: |q0 - (+-gamma)| below this is treated as exactly at the pole (the azimuth is then undefined).
 POLE_TOL = 1e-12
@@ -76,7 +76,7 @@ def _unit_perp(g: np.ndarray) -> np.ndarray:
     return e / np.linalg.norm(e)
 
 
-class SphericalPendulum:
+class SphericalPendulumMotion:
     r"""Closed-form motion of the spherical pendulum on :math:`S^{n-1}` (batched over initial data).
 
     Parameters
@@ -126,7 +126,7 @@ class SphericalPendulum:
 
     Examples
     --------
-    >>> p = SphericalPendulum([0.0, 0.6, 0.8], [0.3, 0.0, 0.0], gamma=[0.0, 0.0, 1.0], mass=1.0, B=9.81)
+    >>> p = SphericalPendulumMotion([0.0, 0.6, 0.8], [0.3, 0.0, 0.0], gamma=[0.0, 0.0, 1.0], mass=1.0, B=9.81)
     >>> q, v = p.state([0.0, 1.0, 2.0])   # shapes (3, 3), (3, 3)
     """
 

@@ -25,9 +25,11 @@ from .potentials import (
            ZeroPotential,
            check_gradient,
 )
+from .protocol import ModelProtocol
 from .system import FORMS, SuslovSystem
 
 __all__ = ["Potential", "ZeroPotential", "LinearPotential", "QuadraticPotential", "FamilyPotential",
-           "GradientCheck", "check_gradient", "SuslovSystem", "FORMS", "Model", "Case", "CaseEntry", "CASES",
+           "GradientCheck", "check_gradient", "SuslovSystem", "FORMS", "Model", "ModelProtocol", "Case",
+           "CaseEntry", "CASES",
            "suslov3", "lagrange3", "kharlamova3", "klebsh_tisserand3", "family3", "gyroscopic3",
            "suslov_free", "lagrange", "kharlamova", "klebsh_tisserand"]

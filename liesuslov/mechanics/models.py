@@ -21,11 +21,15 @@ a body in SO(256) builds its model without the 32640² matrix.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..algebra import Subspace
-from .system import SuslovSystem, gyroscopic_torque, wedge_coordinates
+from .forces import gyroscopic_torque, wedge_coordinates
+
+if TYPE_CHECKING:  # the system builds its models: a run-time import would be a cycle
+    from .system import SuslovSystem
 
 __all__ = ["Model", "build_model"]
 
@@ -38,6 +42,8 @@ _FK_MATMUL_MAX_N = 32
 
 class Model:
     """The exact reduced equations of a scene, in the form an integrator runs.
+
+    Implements :class:`~liesuslov.mechanics.protocol.ModelProtocol`.
 
     Attributes
     ----------
@@ -78,6 +84,9 @@ class Model:
     * ``xi_from_coords(x) -> (..., k)``: ``xi`` of a point ``x`` of D (the caller checks ``x`` in D).
     * ``Gamma_dot(xi, Gamma) -> (..., n)``: ``-Omega Gamma`` (reference; integrators move Gamma by
       the group action).
+
+    A model pickles as its recipe ``(system, has_gamma, form)`` and is rebuilt on unpickling (the
+    maps are closures over precomputed arrays; rebuilding gives the same arrays, so the same numbers).
     """
 
     def __init__(self, *, system: SuslovSystem, form: str, subspace: Subspace, has_gamma: bool,
@@ -100,6 +109,10 @@ class Model:
         self.xi_from_coords = xi_from_coords
         self.Gamma_dot = Gamma_dot
         self.path = path
+
+    def __reduce__(self):
+        # Closures do not pickle; the system (which pickles without its model cache) rebuilds them.
+        return _rebuild_model, (self.system, self.has_gamma, self.form)
 
     def vector_field(self, t, y) -> np.ndarray:
         """``dy/dt`` for the flat state ``y = concat(xi, Gamma)``, shape (state_dim,) or (..., state_dim)."""
@@ -131,6 +144,11 @@ class Model:
 
 
 # ====================================================================== construction
+def _rebuild_model(system: SuslovSystem, has_gamma: bool, form: str) -> Model:
+    """Unpickling: the system's (cached) model of ``form`` with or without Gamma."""
+    return system.model(gamma=has_gamma, form=form)
+
+
 def build_model(system: SuslovSystem, form: str, has_gamma: bool) -> Model:
     """Build the :class:`Model` of ``system`` in ``form`` (already checked to hold)."""
     if form == "multiplier":
@@ -402,7 +420,7 @@ def _multiplier_model(system: SuslovSystem, has_gamma: bool) -> Model:
     alg = system.algebra
     d = alg.dim
     whole = Subspace(alg, np.eye(d))
-    A, Kinv, Sinv = system._reaction
+    A, Kinv, Sinv = system.reaction
     torque = system.torque
 
     def xi_dot(x, G):

@@ -16,17 +16,34 @@ returns the smallest exact model of the scene for the integrators (:mod:`.models
 from __future__ import annotations
 
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
 from .._validation import as_float_array, check_real
-from ..algebra import Inertia, SpecialOrthogonalAlgebra, Subspace, suslov_distribution
+from ..algebra import Inertia, SpecialOrthogonalAlgebra, Subspace, omega_coordinates, suslov_distribution
+from .forces import gyroscopic_torque, wedge_coordinates
+from .models import Model, build_model
 from .potentials import Potential, ZeroPotential
 
-__all__ = ["SuslovSystem", "FORMS"]
+__all__ = ["SuslovSystem", "FORMS", "Reaction", "wedge_coordinates", "gyroscopic_torque"]
 
 #: The forms of the equations, most specialised first (``"auto"`` picks the first that holds).
 FORMS = ("symmetric", "eigenspace", "reduced", "multiplier")
+
+
+class Reaction(NamedTuple):
+    """The matrices of the multiplier (reaction) form, :attr:`SuslovSystem.reaction`.
+
+    ``lambda = -(f K^-1 A^T) S^-1`` with ``S = A K^-1 A^T`` keeps ``A dOmega/dt = 0``.
+    """
+
+    A: np.ndarray
+    """The constraint covectors (rows), shape (r, d)."""
+    Kinv: np.ndarray
+    """``K^-1``, shape (d, d)."""
+    Sinv: np.ndarray
+    """``(A K^-1 A^T)^-1``, shape (r, r)."""
 
 
 class SuslovSystem:
@@ -36,9 +53,11 @@ class SuslovSystem:
     ----------
     inertia : Inertia
         The inertia operator on the algebra (``Inertia.from_mass_tensor(I)`` for a body in SO(n)).
-    constraints : Subspace, optional
-        The fibre ``D = {Omega : <a^i, Omega> = 0}`` of the distribution. Default on so(n): the
-        Fedorov–Kozlov ``suslov_distribution(n)``; required on other algebras.
+    constraints : Subspace, "none", "fedorov_kozlov" or None
+        The fibre ``D = {Omega : <a^i, Omega> = 0}`` of the distribution. None (the default) on so(n):
+        the Fedorov–Kozlov ``suslov_distribution(n)`` (``"fedorov_kozlov"`` says so explicitly);
+        ``"none"``: no constraints, ``D`` the whole algebra (the free Euler–Poincaré body, any algebra).
+        A Subspace is required for other constraints on algebras other than so(n).
     potential : Potential or None
         ``V(Gamma)``; None (or :class:`ZeroPotential`) means V = 0. Only V = 0 on algebras other than so(n).
     gyroscopic : float
@@ -78,7 +97,7 @@ class SuslovSystem:
     ('symmetric', 7)
     """
 
-    def __init__(self, inertia: Inertia, constraints: Subspace | None = None,
+    def __init__(self, inertia: Inertia, constraints: Subspace | str | None = None,
                  potential: Potential | None = None, gyroscopic: float = 0.0) -> None:
         if not isinstance(inertia, Inertia):
             raise TypeError(f"inertia must be an Inertia (e.g. ls.Inertia.from_mass_tensor(I)), "
@@ -89,10 +108,21 @@ class SuslovSystem:
         self.is_so = isinstance(alg, SpecialOrthogonalAlgebra)
         self.n = alg.matrix_size
         # ---- constraints
+        if isinstance(constraints, str):
+            if constraints == "none":  # the scene files' `constraints = "none"`
+                constraints = Subspace(alg, np.eye(alg.dim))
+            elif constraints == "fedorov_kozlov":
+                if not self.is_so:
+                    raise ValueError(f'constraints="fedorov_kozlov" is for so(n), this is {alg.name}: pass a '
+                                     "Subspace or constraints=\"none\"")
+                constraints = None
+            else:
+                raise ValueError(f'constraints must be a Subspace, "none" (no constraints), "fedorov_kozlov" '
+                                 f"or None (Fedorov–Kozlov on so(n)), got {constraints!r}")
         if constraints is None:
             if not self.is_so:
                 raise ValueError(f"constraints are required on {alg.name}: pass the subspace D, e.g. "
-                                 "ls.Subspace.annihilator(algebra, covectors)")
+                                 "ls.Subspace.annihilator(algebra, covectors), or constraints=\"none\"")
             constraints = suslov_distribution(alg.n)
         if not isinstance(constraints, Subspace):
             raise TypeError(f"constraints must be a Subspace (the fibre D), got {type(constraints).__name__}")
@@ -127,6 +157,16 @@ class SuslovSystem:
         self.gyroscopic = eps
         self._models: dict = {}
 
+    # ------------------------------------------------------------------ pickling
+    def __getstate__(self) -> dict:
+        # Models hold closures (they pickle as recipes, see Model.__reduce__): the cache is rebuilt on use.
+        state = self.__dict__.copy()
+        state["_models"] = {}
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+
     # ------------------------------------------------------------------ data
     @property
     def has_potential(self) -> bool:
@@ -158,22 +198,11 @@ class SuslovSystem:
 
     # ------------------------------------------------------------------ input helpers
     def coordinates(self, Omega, name: str = "Omega") -> np.ndarray:
-        """``Omega`` as coordinates ``(..., d)`` from coordinates or representation matrices."""
-        X = as_float_array(Omega, name, ndim_min=1)
-        alg, d, m = self.algebra, self.algebra.dim, self.n
-        if m is not None and X.ndim >= 2 and X.shape[-2:] == (m, m):
-            x = alg.vee(X)
-            scale = max(1.0, float(np.max(np.abs(X), initial=0.0)))
-            if np.allclose(alg.hat(x), X, rtol=0, atol=1e-12 * scale):
-                return x
-            if X.shape[-1] != d:
-                what = "skew-symmetric" if self.is_so else f"in the image of {alg.name}'s representation"
-                raise ValueError(f"{name} as ({m}, {m}) matrices must be {what}")
-        if X.shape[-1] != d:
-            shapes = f"(..., {m}, {m}) matrices or " if m is not None else ""
-            raise ValueError(f"{name} must be {shapes}(..., {d}) coordinates in {alg.name}, "
-                             f"got shape {X.shape}")
-        return X
+        """``Omega`` as coordinates ``(..., d)`` from coordinates or representation matrices.
+
+        See :func:`liesuslov.algebra.omega_coordinates` (the one reader of the package).
+        """
+        return omega_coordinates(self.algebra, Omega, name)
 
     def _gamma(self, Gamma, required: bool, name: str = "Gamma") -> np.ndarray | None:
         if Gamma is None:
@@ -207,16 +236,17 @@ class SuslovSystem:
         return f
 
     @cached_property
-    def _reaction(self):
+    def reaction(self) -> Reaction:
+        """The matrices ``(A, K^-1, (A K^-1 A^T)^-1)`` of the multiplier form (dense: O(d^2) memory)."""
         A = self.covectors
         Kinv = self.inertia.inverse_matrix
         if A.shape[0] == 0:
-            return A, Kinv, np.zeros((0, 0))
+            return Reaction(A, Kinv, np.zeros((0, 0)))
         S = A @ Kinv @ A.T
-        return A, Kinv, np.linalg.inv(S)
+        return Reaction(A, Kinv, np.linalg.inv(S))
 
     def _multipliers_of(self, f: np.ndarray) -> np.ndarray:
-        A, Kinv, Sinv = self._reaction
+        A, Kinv, Sinv = self.reaction
         return -((f @ Kinv) @ A.T) @ Sinv  # S symmetric
 
     # ------------------------------------------------------------------ public reference form
@@ -255,7 +285,7 @@ class SuslovSystem:
         x = self.coordinates(Omega)
         G = self._gamma(Gamma, required=self.needs_gamma)
         f = self.torque(x, G)
-        A, Kinv, _ = self._reaction
+        A, Kinv, _ = self.reaction
         xdot = (f + self._multipliers_of(f) @ A) @ Kinv
         if G is None:
             return xdot, None
@@ -317,7 +347,7 @@ class SuslovSystem:
         # the Fedorov–Kozlov D is the p of (so(n), so(n-1)): skip the O(dim^2) bracket test
         return True if self.is_fedorov_kozlov else self.constraints.is_symmetric()
 
-    def model(self, gamma: bool | None = None, form: str = "auto"):
+    def model(self, gamma: bool | None = None, form: str = "auto") -> Model:
         """The smallest exact model of the scene, for the integrators.
 
         Parameters
@@ -334,8 +364,6 @@ class SuslovSystem:
         Model
             See :class:`liesuslov.mechanics.models.Model` (cached per arguments).
         """
-        from .models import build_model
-
         if gamma is not None and not isinstance(gamma, (bool, np.bool_)):
             raise TypeError(f"gamma must be None, True or False, got {type(gamma).__name__}")
         if gamma is None:
@@ -361,27 +389,7 @@ class SuslovSystem:
         return self._models[key]
 
 
-# ---------------------------------------------------------------------- so(n) helpers
-def wedge_coordinates(a, b) -> np.ndarray:
-    """Coordinates of ``a ∧ b = a b^T - b a^T`` on so(n): (..., n), (..., n) -> (..., n(n-1)/2)."""
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    r, c = np.triu_indices(a.shape[-1], 1)
-    return a[..., r] * b[..., c] - a[..., c] * b[..., r]
-
-
-def gyroscopic_torque(x, Gamma, eps: float) -> np.ndarray:
-    """so(3) coordinates of the gyroscopic force ``eps * Gamma x w`` (w the vector form of x).
-
-    ``Gamma x w = vee(w ∧ Gamma)``; components written out: (..., 3), (..., 3) -> (..., 3).
-    """
-    x = np.asarray(x, dtype=float)
-    G = np.asarray(Gamma, dtype=float)
-    w0, w1, w2 = -x[..., 2], x[..., 1], -x[..., 0]
-    g0, g1, g2 = G[..., 0], G[..., 1], G[..., 2]
-    return eps * np.stack([w0 * g1 - w1 * g0, w0 * g2 - w2 * g0, w1 * g2 - w2 * g1], axis=-1)
-
-
+# ---------------------------------------------------------------------- helpers
 def _probe_potential(potential: Potential, n: int) -> None:
     """Evaluate a user potential on a small batch to catch wrong shapes early, naming the callable."""
     G = np.zeros((2, n))

@@ -1,0 +1,71 @@
+"""Writing files so that nothing is ever half-written: the one atomic writer of the package.
+
+:func:`atomic_write` creates a file through a temporary name in the same folder and renames it into
+place (``os.replace`` is atomic on POSIX and Windows within one file system), so a reader, a crash or
+a full disk never leaves a truncated file. :func:`publish` moves files prepared in a staging folder
+into the output folder, for commands that write several files (``liesuslov run``, the benchmark).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+__all__ = ["atomic_write", "write_text", "publish"]
+
+
+def _umask_mode() -> int:
+    """0o666 less the process umask: the mode an ordinary ``open(path, "w")`` would give."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def atomic_write(path, write: Callable[[str], object]) -> Path:
+    """Create ``path`` through ``write(tmp)`` on a temporary name in the same folder, then rename it.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to create or replace; its folder is created if missing.
+    write : callable
+        ``write(tmp_path: str)`` writes the whole file (e.g. ``fig.savefig``, ``np.savez``,
+        ``Path.write_text``).
+
+    Returns
+    -------
+    Path
+        ``path``. On any error the temporary file is removed and ``path`` is left as it was.
+    """
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}-", suffix=p.suffix, dir=p.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.chmod(tmp, _umask_mode())  # mkstemp makes 0o600; the file should look like any other output
+        os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return p
+
+
+def write_text(path, text: str) -> Path:
+    """Write ``text`` (UTF-8, newlines as given) to ``path`` atomically."""
+    return atomic_write(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8", newline=""))
+
+
+def publish(stage, out, names: Iterable[str]) -> list[str]:
+    """Move the files ``names`` from the staging folder ``stage`` into ``out`` (same file system).
+
+    Each move is an atomic rename; the staging folder is the caller's to remove. Returns the paths in ``out``.
+    """
+    stage, out = Path(stage), Path(out)
+    paths = []
+    for name in names:
+        os.replace(stage / name, out / name)
+        paths.append(str(out / name))
+    return paths
