@@ -185,7 +185,7 @@ BAD = [
                                                    "[integrate]"), r"\[initial\]\.g .*reconstruct = true"),
     ("g not a rotation", _sub("[integrate]", "g = [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\n"
                                               "[integrate]") + "reconstruct = true\n",
-     r"\[initial\]\.g must be a rotation"),
+     r"\[initial\]\.g: g must be in SO\(4\)"),
     ("gyroscopic on so(4)", "gyroscopic = 0.5\n" + BODY, r"gyroscopic must be 0 here"),
     ("constraints kind", "constraints = \"suslov\"\n" + BODY, r"constraints must be \"fedorov_kozlov\" or \"none\""),
     ("dependent covectors", BODY + "[constraints]\nannihilator = [[1, 0, 0, 0, 0, 0], [2, 0, 0, 0, 0, 0]]\n",
@@ -200,6 +200,14 @@ BAD = [
     ("empty file", "", r"needs \[body\] .* or \[case\]"),
     ("not TOML", "x = = 1", r"scene\.toml: not valid TOML"),
     ("section as value", "body = 3\n", r"\[body\] must be a table"),
+    ("n_out huge", _sub('backend = "numpy"', 'backend = "numpy"\nn_out = 1000000000000'),
+     r"\[integrate\]\.n_out must be an integer <= 10000000 \(the output times are held in memory"),
+    ("n_out huge float", _sub('backend = "numpy"', 'backend = "numpy"\nn_out = 1e12'),
+     r"\[integrate\]\.n_out must be an integer <= 10000000 .*got 1000000000000"),
+    ("h below rounding", _sub('backend = "numpy"', 'backend = "numpy"\nh = 1e-300'),
+     r"\[integrate\]\.h = 1e-300 is below the resolution of t"),
+    ("h too many steps", _sub('backend = "numpy"', 'backend = "numpy"\nmethod = "rkmk4"\nh = 1e-9'),
+     r"\[integrate\]\.h = 1e-09 would take 1e\+09 fixed steps"),
 ]
 
 CASE = DEFAULT_SCENE
@@ -285,3 +293,8 @@ def test_se2_errors():
                                                                                 "omega = [1, 0, 0]\nGamma = [1, 0]"))
     free = _load(base.replace("[body]", 'constraints = "none"\n[body]') + tail)
     assert free.system.constraints.dim == 3
+
+
+def test_n_out_written_as_a_whole_float_is_accepted():
+    text = _sub('backend = "numpy"', 'backend = "numpy"\nn_out = 1e2')
+    assert scene_from_text(text).n_out == 100
