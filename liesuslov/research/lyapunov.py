@@ -1,0 +1,177 @@
+r"""The largest Lyapunov exponent of the reduced flow, by Benettin's renormalisation of a nearby trajectory.
+
+The reduced state is ``s = (xi, Gamma)``: ``xi`` the coordinates of Omega in the orthonormal basis of D
+(so the metric is the pairing restricted to D) and ``Gamma`` on the sphere (omitted when the scene has
+none). A companion trajectory starts at ``s0 + delta e`` with ``e`` a random unit tangent vector (tangent
+to D and to the sphere at ``Gamma0``); every ``tau`` time units the separation ``d_k = |s' - s|`` is
+measured and the companion is put back at distance ``delta`` along the separation (``Gamma'``
+renormalised onto the sphere). Then
+
+.. math::
+
+    \lambda(t_K) = \frac{1}{t_K - t_0}\sum_{k=1}^{K} \log\frac{d_k}{\delta}.
+
+For an integrable motion on a torus the separation grows linearly (shear), so ``lambda(t) ~ log(t)/t``
+tends to 0; on a chaotic orbit it converges to a positive number. The convergence estimate reported is
+the change of the running estimate over the second half of the run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..integrators import integrate
+from . import _runner as R
+
+__all__ = ["lyapunov_exponent", "LyapunovResult"]
+
+
+@dataclass
+class LyapunovResult:
+    """The exponent with its history (``lyapunov_exponent(..., return_history=True)``).
+
+    Attributes
+    ----------
+    exponent : ndarray, shape (...)
+        ``lambda(t1)``.
+    times : ndarray, shape (K,)
+        Renormalisation times ``t_k`` (``t_K = t1``).
+    history : ndarray, shape (K, ...)
+        The running estimate ``lambda(t_k)``.
+    spread : ndarray, shape (...)
+        ``max - min`` of the running estimate over the second half of the run: the convergence estimate.
+    log_t_over_t : float
+        ``log(t1 - t0) / (t1 - t0)``: the size of the estimate an integrable (linearly shearing) motion
+        leaves at this length.
+    status : ndarray of int, shape (...)
+        0, or -1 when an integration failed (the exponent is then NaN).
+    """
+
+    exponent: np.ndarray
+    times: np.ndarray
+    history: np.ndarray
+    spread: np.ndarray
+    log_t_over_t: float
+    status: np.ndarray
+
+
+def _tangent(rng: np.random.Generator, k: int, Gamma: np.ndarray | None, B: int) -> np.ndarray:
+    """Random unit tangent vectors ``(B, k [+ n])``: any direction in D, tangent to the sphere at Gamma."""
+    e = rng.standard_normal((B, k))
+    if Gamma is not None:
+        eg = rng.standard_normal(Gamma.shape)
+        eg = eg - np.sum(eg * Gamma, axis=-1, keepdims=True) * Gamma
+        e = np.concatenate([e, eg], axis=-1)
+    return e / np.linalg.norm(e, axis=-1, keepdims=True)
+
+
+def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renormalize_every: float | None = None,
+                      delta: float = 1e-7, return_history: bool = False, **options: Any):
+    r"""Largest Lyapunov exponent of the reduced flow ``(Omega, Gamma)`` over ``t_span`` (a batch).
+
+    Parameters
+    ----------
+    system : SuslovSystem
+    Omega0 : array_like, shape (..., n, n) or (..., d)
+        Initial angular velocities in D.
+    t_span : (t0, t1)
+        ``t1 > t0``.
+    Gamma0 : array_like, shape (..., n), optional
+        Required when the potential needs it; given otherwise, Gamma is part of the state.
+    seed : int or numpy Generator, optional
+        Seed of the random initial tangent vector.
+    renormalize_every : float, optional
+        ``tau``, the time between renormalisations (default about 1, dividing ``t1 - t0`` evenly).
+    delta : float
+        Separation of the companion trajectory (in the Euclidean metric of ``(xi, Gamma)``).
+    return_history : bool
+        Return a :class:`LyapunovResult` (the running estimate and its convergence) instead of the array.
+    **options
+        ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``. Each interval
+        is one ``integrate`` call on the batch of ``2B`` trajectories (reference and companion).
+
+    Returns
+    -------
+    ndarray, shape (...)
+        ``lambda`` in natural log per unit time (NaN where an integration failed); or a
+        :class:`LyapunovResult` with ``return_history=True``.
+    """
+    t0, t1 = R.check_span(t_span)
+    if not isinstance(return_history, (bool, np.bool_)):
+        raise TypeError(f"return_history must be True or False, got {type(return_history).__name__}")
+    delta = R.positive(delta, "delta")
+    if delta >= 1e-2:
+        raise ValueError(f"delta must be small (the companion's distance, e.g. 1e-7), got {delta:g}")
+    opts = R.options_with_defaults(options)
+    b = R.prepare(system, Omega0, Gamma0)
+    span = t1 - t0
+    if renormalize_every is None:
+        K = max(1, int(round(span)))
+    else:
+        tau = R.positive(renormalize_every, "renormalize_every")
+        if tau > span:
+            raise ValueError(f"renormalize_every = {tau:g} is longer than t_span ({span:g})")
+        K = max(1, int(round(span / tau)))
+    times = t0 + span * np.arange(1, K + 1) / K
+    rng = np.random.default_rng(seed)
+    B = b.size
+    Dbasis = system.constraints.basis
+    k = Dbasis.shape[0]
+    xi = b.omega @ Dbasis.T
+    G = b.Gamma
+    e = _tangent(rng, k, G, B)
+    xi_p = xi + delta * e[:, :k]
+    G_p = None
+    if G is not None:
+        G_p = G + delta * e[:, k:]
+        G_p = G_p / np.linalg.norm(G_p, axis=-1, keepdims=True)
+    logsum = np.zeros(B)
+    hist = np.empty((K, B))
+    status = np.zeros(B, dtype=int)
+    t_prev = t0
+    for j, t_next in enumerate(times):
+        om = np.concatenate([xi, xi_p]) @ Dbasis
+        kw = dict(opts)
+        if G is not None:
+            kw["Gamma0"] = np.concatenate([G, G_p])
+        sol = integrate(system, om, (t_prev, t_next), **kw)
+        st = np.broadcast_to(np.asarray(sol.status), (2 * B,))
+        bad = (st[:B] < 0) | (st[B:] < 0)
+        om_end = sol.omega[-1]
+        xi_all = om_end @ Dbasis.T
+        xi, xi_q = xi_all[:B], xi_all[B:]
+        d = xi_q - xi
+        if G is not None:
+            G_all = sol.Gamma[-1]
+            G, G_q = G_all[:B], G_all[B:]
+            d = np.concatenate([d, G_q - G], axis=-1)
+        dist = np.linalg.norm(d, axis=-1)
+        bad |= ~np.isfinite(dist) | (dist == 0.0)
+        status[bad] = -1
+        logsum = logsum + np.log(np.where(bad, 1.0, dist) / delta)
+        logsum[status < 0] = np.nan
+        hist[j] = logsum / (t_next - t0)
+        unit = d / np.where(bad, 1.0, dist)[:, None]
+        xi_p = xi + delta * unit[:, :k]
+        if G is not None:
+            G_p = G + delta * unit[:, k:]
+            G_p = G_p / np.linalg.norm(G_p, axis=-1, keepdims=True)
+        # a failed trajectory keeps NaN; restart it from finite numbers so the batch call stays valid
+        if np.any(bad):
+            xi = np.where(bad[:, None], b.omega @ Dbasis.T, xi)
+            xi_p = np.where(bad[:, None], xi, xi_p)
+            if G is not None:
+                G = np.where(bad[:, None], b.Gamma, G)
+                G_p = np.where(bad[:, None], G, G_p)
+        t_prev = t_next
+    lam = hist[-1].reshape(b.shape)
+    if not return_history:
+        return lam
+    half = hist[K // 2:]
+    spread = (np.max(half, axis=0) - np.min(half, axis=0)).reshape(b.shape)
+    return LyapunovResult(exponent=lam, times=times, history=hist.reshape((K,) + b.shape), spread=spread,
+                          log_t_over_t=float(np.log(span) / span) if span > 1 else float("nan"),
+                          status=status.reshape(b.shape))

@@ -1,0 +1,434 @@
+r"""Reconstruction phase: the period of a periodic reduced motion and the monodromy of the attitude.
+
+When the reduced state ``s = (Omega, Gamma)`` is periodic with period ``T``, left invariance gives
+``g(t + T) = g(t) R`` with a constant ``R = g(t0)^{-1} g(t0 + T)`` in SO(n), the same for every ``g0``
+(``g0 h`` solves the same equation: ``(g0 h)^{-1} (g0 h)(T) = h^{-1} ... `` with ``h = I`` at t0). Since
+``Gamma = g^T gamma`` returns, ``R Gamma0 = Gamma0``; without a potential the spatial momentum
+``m = g M`` is constant and ``M`` returns, so ``R M0 = M0``.
+
+For the free rigid body (n = 3, D the whole algebra, V = 0) Montgomery's formula splits the rotation
+angle about ``M0`` into a dynamic and a geometric part (derived in ``docs/reconstruction.md``):
+
+.. math::
+
+    \Delta\theta \equiv \frac{2ET}{|M_0|} - \Lambda \pmod{2\pi},\qquad
+    \Lambda = \oint \frac{p\cdot(u\times\dot u)}{1 + p\cdot u}\,dt,\qquad u = \frac{M}{|M|},
+
+``Lambda`` the solid angle on the left of the closed curve ``u(t)`` (outward normal), ``p`` any point it
+winds around (we take the direction of its mean).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..algebra import vee3
+from . import _runner as R
+
+__all__ = ["ReconstructionPhase", "reconstruction_phase", "rotation_angles", "axis_angle", "solid_angle"]
+
+#: Status codes of :class:`ReconstructionPhase` (per trajectory).
+STATUS = {0: "returned", 1: "no return within t_max", -1: "integration failed"}
+
+
+@dataclass
+class ReconstructionPhase:
+    r"""Period and monodromy of periodic reduced motions (a batch).
+
+    Attributes
+    ----------
+    period : ndarray, shape (...)
+        ``T`` (NaN where no return was found).
+    monodromy : ndarray, shape (..., m, m)
+        ``R = g(t0)^{-1} g(t0 + T)`` in SO(n).
+    angles : ndarray, shape (..., floor(m/2))
+        Rotation angles of the invariant planes of R (real Schur form), descending, in ``[0, pi]``.
+    axis : ndarray, shape (..., 3)
+        n = 3: ``M0/|M0|`` if R fixes ``M0``, else ``Gamma0`` if R fixes ``Gamma0``, else R's own axis;
+        NaN for n != 3.
+    angle : ndarray, shape (...)
+        n = 3: ``R = exp(angle hat(axis))``, in ``(-pi, pi]`` (``>= 0`` with R's own axis); NaN for n != 3.
+    dynamic_phase, geometric_phase : ndarray, shape (...)
+        The free rigid body (n = 3, no constraint, no potential): ``2 E T / |M0|`` and the solid angle
+        ``Lambda`` swept by ``M/|M|``, with ``angle == dynamic_phase - geometric_phase (mod 2 pi)``
+        (Montgomery); NaN for other systems.
+    status : ndarray of int, shape (...)
+        0 returned (or period given), 1 no return within ``t_max``, -1 the integration failed.
+    return_distance : ndarray, shape (...)
+        ``|s(T) - s0| / |s0|`` of the reduced state at the accepted return (the closest return seen
+        when none was accepted; NaN for a given period).
+    crossings : ndarray of int, shape (...)
+        Section crossings examined (0 for a given period).
+    axis_kind : ndarray of str, shape (...)
+        ``"momentum"``, ``"gamma"``, ``"own"`` or ``""`` (n != 3 or no period).
+    """
+
+    period: np.ndarray
+    monodromy: np.ndarray
+    angles: np.ndarray
+    axis: np.ndarray
+    angle: np.ndarray
+    dynamic_phase: np.ndarray
+    geometric_phase: np.ndarray
+    status: np.ndarray
+    return_distance: np.ndarray
+    crossings: np.ndarray
+    axis_kind: np.ndarray
+    message: str = ""
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        """True iff every trajectory returned (status 0)."""
+        return bool(np.all(self.status == 0))
+
+    def montgomery_defect(self) -> np.ndarray:
+        """``angle - (dynamic_phase - geometric_phase)`` wrapped to ``(-pi, pi]`` (free body; NaN otherwise)."""
+        return _wrap(self.angle - (self.dynamic_phase - self.geometric_phase))
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    """Angles to ``(-pi, pi]``."""
+    a = np.asarray(a, dtype=float)
+    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
+
+
+# ------------------------------------------------------------------------------------- linear algebra
+def rotation_angles(Rm) -> np.ndarray:
+    r"""Rotation angles of the invariant planes of rotations, from the real Schur form.
+
+    Parameters
+    ----------
+    Rm : array_like, shape (..., m, m)
+        Rotations (orthogonal, det +1).
+
+    Returns
+    -------
+    ndarray, shape (..., floor(m/2))
+        Descending, in ``[0, pi]``: a 2x2 block ``[[a, b], [c, d]]`` gives ``atan2(sqrt(-b c), (a + d)/2)``
+        (accurate near 0 and pi); 1x1 blocks ``-1`` pair into ``pi``, ``+1`` into 0.
+    """
+    from scipy.linalg import schur
+
+    Rm = np.asarray(Rm, dtype=float)
+    m = Rm.shape[-1]
+    flat = Rm.reshape(-1, m, m)
+    out = np.full((flat.shape[0], m // 2), np.nan)
+    for k, A in enumerate(flat):
+        if not np.all(np.isfinite(A)):
+            continue
+        T, _ = schur(A, output="real")
+        ang: list[float] = []
+        minus = 0
+        i = 0
+        while i < m:
+            if i + 1 < m and T[i + 1, i] != 0.0:
+                a, b, c, d = T[i, i], T[i, i + 1], T[i + 1, i], T[i + 1, i + 1]
+                ang.append(float(np.arctan2(np.sqrt(max(-b * c, 0.0)), 0.5 * (a + d))))
+                i += 2
+            else:
+                minus += T[i, i] < 0.0
+                i += 1
+        ang += [np.pi] * (minus // 2)
+        ang += [0.0] * (m // 2 - len(ang))
+        out[k] = sorted(ang[: m // 2], reverse=True)
+    return out.reshape(Rm.shape[:-2] + (m // 2,))
+
+
+def axis_angle(Rm, axis=None) -> tuple[np.ndarray, np.ndarray]:
+    r"""Angle of 3x3 rotations about given unit axes (signed), or their own axis and angle.
+
+    Parameters
+    ----------
+    Rm : array_like, shape (..., 3, 3)
+    axis : array_like, shape (..., 3), optional
+        A unit axis fixed by R: returns ``atan2(axis . v, (tr R - 1)/2)`` with ``v = vee((R - R^T)/2)``,
+        i.e. ``R = exp(angle hat(axis))``, angle in ``(-pi, pi]``. Without it, R's axis with angle in ``[0, pi]``.
+
+    Returns
+    -------
+    axis : ndarray, shape (..., 3)
+    angle : ndarray, shape (...)
+    """
+    Rm = np.asarray(Rm, dtype=float)
+    v = vee3(0.5 * (Rm - np.swapaxes(Rm, -1, -2)))
+    c = 0.5 * (np.trace(Rm, axis1=-2, axis2=-1) - 1.0)
+    if axis is not None:
+        axis = np.asarray(axis, dtype=float)
+        return np.broadcast_to(axis, v.shape).copy(), np.arctan2(np.sum(axis * v, axis=-1), c)
+    s = np.linalg.norm(v, axis=-1)
+    angle = np.arctan2(s, c)
+    ax = v / np.where(s > 0.0, s, 1.0)[..., None]
+    # near pi, v ~ sin(angle) loses the axis: take the longest column of (R + I)/2 = a a^T (at angle pi)
+    P = 0.5 * (Rm + np.eye(3))
+    cols = np.linalg.norm(P, axis=-2)
+    j = np.argmax(cols, axis=-1)
+    col = np.take_along_axis(P, j[..., None, None], axis=-1)[..., 0]
+    col = col / np.where(cols.max(axis=-1) > 0, cols.max(axis=-1), 1.0)[..., None]
+    col = col * np.where(np.sum(col * v, axis=-1) < 0.0, -1.0, 1.0)[..., None]
+    ax = np.where((s < 1e-6)[..., None] & (c < 0.0)[..., None], col, ax)
+    return ax, angle
+
+
+def solid_angle(u, dt: float | np.ndarray, p=None) -> np.ndarray:
+    r"""The solid angle on the left of a closed curve on the unit sphere sampled uniformly over one period.
+
+    ``Lambda = int p.(u x u')/(1 + p.u) dt`` by the trapezoidal rule (exponentially convergent for a
+    smooth periodic curve); ``u'`` by the spectral derivative of the samples.
+
+    Parameters
+    ----------
+    u : array_like, shape (N, ..., 3)
+        ``u(t_j)``, ``t_j = j dt``, ``j = 0..N-1`` (the point ``t = T`` left out).
+    dt : float or array_like, shape (...)
+    p : array_like, shape (..., 3), optional
+        A point the curve winds around (default: the direction of the mean of ``u``).
+    """
+    u = np.asarray(u, dtype=float)
+    N = u.shape[0]
+    if p is None:
+        p = np.mean(u, axis=0)
+        p = p / np.linalg.norm(p, axis=-1, keepdims=True)
+    k = np.fft.fftfreq(N, d=1.0 / N)
+    if N % 2 == 0:
+        k[N // 2] = 0.0
+    shape = (N,) + (1,) * (u.ndim - 1)
+    uh = np.fft.fft(u, axis=0)
+    du = np.real(np.fft.ifft(1j * k.reshape(shape) * uh, axis=0))  # d u / d(2 pi j / N)
+    T = np.asarray(dt) * N
+    du = du * (2.0 * np.pi / T)[..., None] if np.ndim(T) else du * (2.0 * np.pi / T)
+    integrand = np.sum(p * np.cross(u, du), axis=-1) / (1.0 + np.sum(p * u, axis=-1))
+    return np.sum(integrand, axis=0) * dt
+
+
+# ------------------------------------------------------------------------------------- the tool
+def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t_max: float = 1000.0,
+                         return_tol: float | None = None, on_failure: str = "raise", samples: int = 256,
+                         **options: Any) -> ReconstructionPhase:
+    r"""Period and monodromy ``R = g(t0)^{-1} g(t0 + T)`` of periodic reduced motions (a batch).
+
+    Parameters
+    ----------
+    system : SuslovSystem
+    Omega0 : array_like, shape (..., n, n) or (..., d)
+        Initial angular velocities in D.
+    Gamma0 : array_like, shape (..., n), optional
+        Required when the potential needs it; when given it is part of the reduced state.
+    g0 : array_like, shape (..., m, m), optional
+        Accepted for symmetry with ``integrate``; R does not depend on it (the attitude is integrated
+        from the identity).
+    period : float or array_like, shape (...), optional
+        Use this period as is. None: the first return of the reduced state ``s = (omega, Gamma)`` to
+        the plane through ``s0`` normal to the reduced velocity (crossed upwards), located on the
+        continuous extension; a crossing counts as a return only if ``|s - s0| <= return_tol |s0|``,
+        otherwise the search goes on to the next crossing.
+    t_max : float
+        Give up the search at this time.
+    return_tol : float, optional
+        Default ``max(1e-6, 1e4 rtol)``.
+    on_failure : {"raise", "nan"}
+        A trajectory without a return within ``t_max`` (or a failed integration): ValueError naming
+        ``t_max`` (default), or NaN results with ``status`` 1 (-1).
+    samples : int
+        Points per period for the geometric phase of the free body.
+    **options
+        ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``.
+
+    Returns
+    -------
+    ReconstructionPhase
+
+    Raises
+    ------
+    ValueError
+        No return within ``t_max`` (``on_failure="raise"``), or bad input.
+    """
+    if on_failure not in ("raise", "nan"):
+        raise ValueError(f"on_failure must be 'raise' or 'nan', got {on_failure!r}")
+    t_max = R.positive(t_max, "t_max")
+    if isinstance(samples, (bool, np.bool_)) or not isinstance(samples, (int, np.integer)) or samples < 16:
+        raise ValueError(f"samples must be an integer >= 16, got {samples!r}")
+    opts = R.options_with_defaults(options)
+    b = R.prepare(system, Omega0, Gamma0, g0)
+    m = system.n
+    if m is None:
+        raise ValueError(f"reconstruction_phase needs a matrix representation of {system.algebra.name}")
+    if return_tol is None:
+        return_tol = max(1e-6, 1e4 * float(opts.get("rtol", 1e-10)))
+    return_tol = R.positive(return_tol, "return_tol")
+    B = b.size
+    s0 = b.reduced(b.omega, b.Gamma)
+    scale = np.maximum(np.linalg.norm(s0, axis=-1), np.finfo(float).tiny)
+    T = np.full(B, np.nan)
+    Rm = np.full((B, m, m), np.nan)
+    status = np.zeros(B, dtype=int)
+    dist = np.full(B, np.nan)
+    count = np.zeros(B, dtype=int)
+    ident = np.broadcast_to(np.eye(m), (B, m, m)).copy()
+    if period is None:
+        _search(system, b, s0, scale, return_tol, t_max, opts, T, Rm, status, dist, count)
+        message = _message(status, dist, t_max, return_tol)
+        if on_failure == "raise" and np.any(status != 0):
+            raise ValueError(message)
+    else:
+        P = _period(period, b.shape)
+        status[:] = 0
+        for val in np.unique(P):
+            rows = np.nonzero(P == val)[0]
+            g_end, st = R.run_plain(system, b.omega[rows], None if b.Gamma is None else b.Gamma[rows], ident[rows],
+                                    (0.0, float(val)), opts)
+            T[rows] = val
+            Rm[rows] = g_end
+            status[rows] = np.where(st < 0, -1, 0)
+        message = _message(status, dist, t_max, return_tol)
+        if on_failure == "raise" and np.any(status != 0):
+            raise ValueError(message)
+    # ---- derived quantities
+    ok = status == 0
+    angles = rotation_angles(Rm)
+    axis = np.full((B, 3), np.nan)
+    angle = np.full(B, np.nan)
+    kind = np.full(B, "", dtype=object)
+    dyn = np.full(B, np.nan)
+    geo = np.full(B, np.nan)
+    if m == 3 and system.is_so:
+        _axes(system, b, Rm, ok, axis, angle, kind)
+        if _is_free_body(system):
+            _montgomery(system, b, T, ok, opts, samples, dyn, geo)
+    shp = b.shape
+    return ReconstructionPhase(
+        period=T.reshape(shp), monodromy=Rm.reshape(shp + (m, m)), angles=angles.reshape(shp + (m // 2,)),
+        axis=axis.reshape(shp + (3,)), angle=angle.reshape(shp), dynamic_phase=dyn.reshape(shp),
+        geometric_phase=geo.reshape(shp), status=status.reshape(shp), return_distance=dist.reshape(shp),
+        crossings=count.reshape(shp), axis_kind=kind.astype(str).reshape(shp), message=message,
+        stats={"return_tol": return_tol, "t_max": t_max, **opts})
+
+
+def _period(period, shape) -> np.ndarray:
+    from .._validation import as_float_array
+
+    P = as_float_array(period, "period")
+    if np.any(P <= 0.0):
+        raise ValueError(f"period must be positive, got {P.min():.3g}")
+    try:
+        P = np.broadcast_to(P, shape)
+    except ValueError as exc:
+        raise ValueError(f"period of shape {P.shape} does not broadcast to the batch {shape}") from exc
+    return P.reshape(-1)
+
+
+def _message(status, dist, t_max, tol) -> str:
+    if np.all(status == 0):
+        return "every trajectory returned"
+    parts = []
+    nr = int(np.sum(status == 1))
+    if nr:
+        d = dist[status == 1]
+        closest = f"; the closest return was at a relative distance {np.nanmin(d):.3g}" if np.any(np.isfinite(d)) \
+            else "; the section through the initial state was never crossed again"
+        parts.append(f"{nr} trajectory(ies) did not return to the initial reduced state within t_max = {t_max:g} "
+                     f"(return_tol = {tol:.3g}){closest}: the motion is not periodic (asymptotic or "
+                     "quasi-periodic), or raise t_max")
+    nf = int(np.sum(status == -1))
+    if nf:
+        parts.append(f"{nf} integration(s) failed before a return")
+    return "; ".join(parts)
+
+
+def _search(system, b, s0, scale, tol, t_max, opts, T, Rm, status, dist, count) -> None:
+    """Windows of growing length until every trajectory has returned, failed or reached t_max."""
+    B = b.size
+    m = system.n
+    xdot, Gdot = system.rhs(b.omega, b.Gamma)
+    off = np.sum(xdot * b.omega, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot * b.Gamma, axis=-1))
+    plane = R.make_plane(omega=xdot, Gamma=Gdot, offset=off, direction=1)
+    speed = np.sqrt(np.sum(xdot ** 2, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot ** 2, axis=-1)))
+    # the first return cannot come before the state has moved away: ignore crossings closer to t0
+    # than a rounding-level time (a root located at t0 itself)
+    t_min = 1e-9 * (1.0 + scale / np.maximum(speed, np.finfo(float).tiny))
+    status[:] = 1
+    active = np.arange(B)
+    omega, Gamma = b.omega.copy(), None if b.Gamma is None else b.Gamma.copy()
+    g = np.broadcast_to(np.eye(m), (B, m, m)).copy()
+    t_a = 0.0
+    rate = R._rate(system, b.omega, b.Gamma)
+    width = min(t_max, 32.0 / rate)
+    while active.size and t_a < t_max:
+        t_b = min(t_max, t_a + width)
+        ev = R.slice_event(plane, active, B)
+        win = R.run_window(system, omega[active], None if Gamma is None else Gamma[active], g[active],
+                           (t_a, t_b), ev, 1, opts, True)
+        cr = win.crossings
+        done = np.zeros(active.size, dtype=bool)
+        for j in range(cr.t.size):
+            loc = int(cr.index[j])
+            k = int(active[loc])
+            if done[loc] or cr.t[j] <= t_min[k]:
+                continue
+            count[k] += 1
+            s = b.reduced(cr.omega[j], None if cr.Gamma is None else cr.Gamma[j])
+            d = float(np.linalg.norm(s - s0[k]) / scale[k])
+            dist[k] = d if not np.isfinite(dist[k]) else min(dist[k], d)
+            if d <= tol:
+                T[k], Rm[k], dist[k], status[k] = cr.t[j], cr.g[j], d, 0
+                done[loc] = True
+        failed = win.status < 0
+        status[active[failed & ~done]] = -1
+        keep = ~done & ~failed
+        omega[active] = win.omega
+        if Gamma is not None:
+            Gamma[active] = win.Gamma
+        g[active] = win.g
+        active = active[keep]
+        t_a = t_b
+        width *= 2.0
+
+
+def _is_free_body(system) -> bool:
+    return (system.is_so and system.n == 3 and system.constraints.dim == system.algebra.dim
+            and not system.has_potential and system.gyroscopic == 0.0)
+
+
+def _vec3(x: np.ndarray) -> np.ndarray:
+    """so(3) coordinates ``(Omega_12, Omega_13, Omega_23)`` to the vector ``(-Omega_23, Omega_13, -Omega_12)``."""
+    return np.stack([-x[..., 2], x[..., 1], -x[..., 0]], axis=-1)
+
+
+def _axes(system, b, Rm, ok, axis, angle, kind) -> None:
+    """n = 3: the axis (M0, else Gamma0, else R's own) and the signed angle about it."""
+    M0 = _vec3(system.inertia(b.omega))
+    nM = np.linalg.norm(M0, axis=-1)
+    fix_tol = 1e-6
+    for k in np.nonzero(ok)[0]:
+        Rk = Rm[k]
+        cands = []
+        if nM[k] > 0:
+            cands.append(("momentum", M0[k] / nM[k]))
+        if b.Gamma is not None:
+            cands.append(("gamma", b.Gamma[k]))
+        for name, a in cands:
+            if np.linalg.norm(Rk @ a - a) <= fix_tol:
+                axis[k], angle[k] = axis_angle(Rk, a)
+                kind[k] = name
+                break
+        else:
+            axis[k], angle[k] = axis_angle(Rk)
+            kind[k] = "own"
+
+
+def _montgomery(system, b, T, ok, opts, samples, dyn, geo) -> None:
+    """Free body: ``2 E T / |M0|`` and the solid angle swept by ``M/|M|`` over one period."""
+    E = system.energy(b.omega)
+    M0 = _vec3(system.inertia(b.omega))
+    dyn[ok] = (2.0 * E * T / np.linalg.norm(M0, axis=-1))[ok]
+    from ..integrators import integrate
+
+    for k in np.nonzero(ok)[0]:
+        tt = np.linspace(0.0, T[k], samples + 1)
+        sol = integrate(system, b.omega[k], (0.0, T[k]), t_eval=tt, **opts)
+        M = _vec3(system.inertia(sol.omega[:-1]))
+        u = M / np.linalg.norm(M, axis=-1, keepdims=True)
+        geo[k] = solid_angle(u, T[k] / samples)
