@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad, solve_ivp
 
+import liesuslov as ls
 from liesuslov.analytic import (
     KharlamovaMotion,
     KlebshTisserandMotion,
@@ -772,3 +773,34 @@ def test_validation_errors():
     for call, msg in bad:
         with pytest.raises(ValueError, match=msg):
             call()
+
+
+def test_suslov3_asymptotic_points_for_a_general_constraint_vector():
+    # <a, w> = 0 with a not e3: the trajectory tends to w_+ = mu (a x J a) on its energy ellipse.
+    from liesuslov.analytic import suslov3_asymptotic_points
+
+    J = np.array([[2.0, 0.2, 0.1], [0.2, 3.0, -0.3], [0.1, -0.3, 4.0]])
+    a = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    # so(3) coordinates x = (O12, O13, O23), w = (-x3, x2, -x1): <a, w> = <(-a3, a2, -a1), x>
+    D = ls.Subspace.annihilator(ls.so(3), [[-a[2], a[1], -a[0]]])
+    system = ls.SuslovSystem(ls.Inertia.from_principal_moments(J), constraints=D)
+    x0 = np.array([0.4, -0.2, 0.0]) @ D.basis.T @ D.basis
+    sol = ls.integrate(system, x0, (0.0, 400.0), method="rkmk45", rtol=1e-11, atol=1e-13,
+                       t_eval=[100.0, 200.0, 400.0])
+    x1 = sol.omega
+    w1 = np.stack([-x1[..., 2], x1[..., 1], -x1[..., 0]], axis=-1)
+    w0 = np.array([-x0[2], x0[1], -x0[0]])
+    h = 0.5 * w0 @ J @ w0
+    wp, wm = suslov3_asymptotic_points(J, h, a=a)
+    assert abs(wp @ a) < 1e-15 and abs(0.5 * wp @ J @ wp - h) < 1e-14 * h
+    dist = np.linalg.norm(w1 - wp, axis=-1)
+    assert dist[0] > dist[1] > dist[2] and dist[2] < 1e-9  # an exponential approach to w_+
+    np.testing.assert_allclose(wm, -wp)
+    # a = e3 given explicitly is the default
+    J3 = np.array([[2.0, 0.0, 0.3], [0.0, 3.0, 0.4], [0.3, 0.4, 4.0]])
+    np.testing.assert_allclose(suslov3_asymptotic_points(J3, 1.0, a=[0, 0, 1.0])[0],
+                               suslov3_asymptotic_points(J3, 1.0)[0], atol=1e-15)
+    with pytest.raises(ValueError, match="a must be a unit vector"):
+        suslov3_asymptotic_points(J, 1.0, a=[0.0, 0.0, 2.0])
+    with pytest.raises(ValueError, match="a is an eigenvector of J"):
+        suslov3_asymptotic_points(np.diag([1.0, 2.0, 3.0]), 1.0, a=[0.0, 1.0, 0.0])

@@ -5,10 +5,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import liesuslov as ls
 from liesuslov.algebra import Inertia, Subspace, se, so, suslov_distribution
 from liesuslov.mechanics import (
     FamilyPotential,
     LinearPotential,
+    ModelProtocol,
     Potential,
     QuadraticPotential,
     SuslovSystem,
@@ -539,3 +541,154 @@ def test_fedorov_kozlov_model_never_builds_K():
     assert m.form == "symmetric" and "O(n)" in m.path
     np.testing.assert_allclose(m.reduced_inertia, np.diag(J.mass_tensor.diagonal()[:-1] + J.mass_tensor[-1, -1]))
     assert "matrix" not in J.__dict__ and "inverse_matrix" not in J.__dict__
+
+
+# ---------------------------------------------------------------------- pickling (issue 12)
+def _cube_V(G):
+    return G[..., 0] ** 3
+
+
+def _cube_grad(G):
+    out = np.zeros_like(G)
+    out[..., 0] = 3.0 * G[..., 0] ** 2
+    return out
+
+
+def _integrate_case(system, case, method="rkmk4"):
+    omega0, Gamma0 = case.random_state(7, 3, scale=0.5)
+    return ls.integrate(system, omega0, (0.0, 0.5), Gamma0=Gamma0, method=method, h=0.05, backend="numpy")
+
+
+@pytest.mark.parametrize("name", sorted(ls.CASES))
+def test_systems_models_and_solutions_pickle_also_after_integrate(name):
+    import pickle
+
+    case = ls.CASES[name].build()
+    system = case.system
+    before = pickle.loads(pickle.dumps(system))  # before any model exists
+    sol = _integrate_case(system, case)  # caches models built from closures in the system
+    assert system.model() is not None
+    after = pickle.loads(pickle.dumps(system))
+    model = pickle.loads(pickle.dumps(system.model()))
+    assert isinstance(model, ModelProtocol)
+    assert (model.form, model.k, model.has_gamma, model.path) == (system.model().form, system.model().k,
+                                                                   system.model().has_gamma, system.model().path)
+    # the unpickled systems integrate to the same numbers, bit for bit (same arrays, same operations)
+    for copy in (before, after, model.system):
+        again = _integrate_case(copy, case)
+        np.testing.assert_array_equal(again.omega, sol.omega)
+        if sol.Gamma is not None:
+            np.testing.assert_array_equal(again.Gamma, sol.Gamma)
+    sol2 = pickle.loads(pickle.dumps(sol))
+    np.testing.assert_array_equal(sol2.omega, sol.omega)
+    assert sol2.stats["steps"] == sol.stats["steps"]
+
+
+def test_multiplier_model_pickles():
+    import pickle
+
+    case = ls.CASES["suslov_free"].build()
+    m = case.system.model(form="multiplier")
+    m2 = pickle.loads(pickle.dumps(m))
+    x = case.random_state(1, 4)[0]
+    np.testing.assert_array_equal(m2.xi_dot(x, None), m.xi_dot(x, None))
+
+
+def test_potentials_from_module_level_callables_pickle_and_lambdas_do_not():
+    import pickle
+
+    P = ls.Potential(_cube_V, _cube_grad, n=3)
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor([1.0, 2.0, 3.0]), potential=P)
+    G = np.array([[0.6, 0.0, 0.8], [0.0, 1.0, 0.0]])
+    s2 = pickle.loads(pickle.dumps(system))
+    np.testing.assert_array_equal(s2.potential.grad(G), P.grad(G))
+    F = ls.CASES["family3"].build().system.potential  # module-level example functions
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(F)).V(G), F.V(G))
+    L = ls.Potential(lambda G: G[..., 0], lambda G: np.ones_like(G), n=3)
+    with pytest.raises((pickle.PicklingError, AttributeError, TypeError), match="lambda"):
+        pickle.dumps(L)
+
+
+def test_pendulum_model_implements_the_protocol_and_pickles():
+    import pickle
+
+    P = ls.SphericalPendulum(3, m=2.0, B=1.0)
+    m = P.model()
+    assert isinstance(m, ModelProtocol)
+    m2 = pickle.loads(pickle.dumps(m))
+    xi, q = np.array([0.1, -0.2, 0.3]), np.array([0.0, 0.6, 0.8])
+    np.testing.assert_array_equal(m2.xi_dot(xi, q), m.xi_dot(xi, q))
+    np.testing.assert_array_equal(m2.omega_matrix(xi), m.omega_matrix(xi))
+
+
+def test_every_model_implements_the_protocol_with_the_documented_shapes():
+    for name, entry in ls.CASES.items():
+        system = entry.build().system
+        for form in system.available_forms():
+            m = system.model(form=form)
+            assert isinstance(m, ModelProtocol), (name, form)
+            xi = np.ones((2, m.k)) * 0.1
+            G = np.tile(np.eye(m.n)[-1], (2, 1)) if m.has_gamma else None
+            assert m.xi_dot(xi, G).shape == (2, m.k)
+            assert m.omega_matrix(xi).shape == (2, m.n, m.n)
+            x = m.omega_coords(xi)
+            assert x.shape == (2, m.algebra.dim)
+            np.testing.assert_allclose(m.xi_from_coords(x), xi, atol=1e-15)
+            assert m.state_dim == m.k + (m.n if m.has_gamma else 0)
+
+
+def test_mechanics_modules_import_no_cycle():
+    # system builds models; models need only the lower modules (forces, protocol) at run time
+    import ast
+    from pathlib import Path
+
+    src = Path(ls.mechanics.__file__).parent / "models.py"
+    tree = ast.parse(src.read_text(encoding="utf-8"))
+    top_level = [n for n in tree.body if isinstance(n, ast.ImportFrom)]
+    assert not any(n.module == "system" for n in top_level)
+
+
+# ---------------------------------------------------------------------- small frictions (issue 13)
+def test_constraints_none_means_the_whole_algebra():
+    J = ls.Inertia.from_mass_tensor([1.0, 2.0, 3.0, 4.0])
+    free = ls.SuslovSystem(J, constraints="none")
+    assert free.constraints.dim == 6
+    assert ls.SuslovSystem(J).constraints.dim == 3  # the default stays Fedorov–Kozlov
+    assert ls.SuslovSystem(J, constraints="fedorov_kozlov").is_fedorov_kozlov
+    x0 = np.array([0.3, -0.2, 0.1, 0.4, 0.2, -0.1])
+    sol = ls.integrate(free, x0, (0.0, 1.0), method="rkmk45", rtol=1e-11, atol=1e-13, backend="numpy")
+    # the free body: the Casimir |M|^2 is conserved (not true under constraints)
+    M = J(sol.omega)
+    np.testing.assert_allclose(np.sum(M * M, -1), np.sum(M[0] * M[0]), rtol=1e-9)
+    se2 = ls.SuslovSystem(ls.Inertia(ls.se(2), np.diag([1.0, 2.0, 3.0])), constraints="none")
+    assert se2.constraints.dim == 3
+    with pytest.raises(ValueError, match='constraints must be a Subspace, "none"'):
+        ls.SuslovSystem(J, constraints="free")
+    with pytest.raises(ValueError, match="fedorov_kozlov.*is for so\\(n\\)"):
+        ls.SuslovSystem(ls.Inertia(ls.se(2), np.eye(3)), constraints="fedorov_kozlov")
+
+
+def test_random_state_takes_an_int_batch_size():
+    case = ls.CASES["kharlamova"].build()
+    omega, Gamma = case.random_state(0, 1000)
+    assert omega.shape == (1000, 6) and Gamma.shape == (1000, 4)
+    np.testing.assert_array_equal(case.random_state(0, (1000,))[0], omega)
+    with pytest.raises(TypeError, match="batch must be an int or a tuple of ints"):
+        case.random_state(0, "many")
+
+
+@pytest.mark.parametrize("where", ["Omega0", "Gamma0", "mass tensor", "potential"])
+def test_complex_input_is_a_type_error_not_a_dropped_imaginary_part(where):
+    I = [1.0, 2.0, 3.0, 4.0]
+    Omega0 = np.array([0.0, 0.0, 0.3, 0.0, -0.2, 0.5])
+    Gamma0 = np.array([0.0, 0.6, 0.0, 0.8])
+    with pytest.raises(TypeError, match="must be real, got complex values"):
+        if where == "mass tensor":
+            ls.Inertia.from_mass_tensor(np.array(I) + 1e-3j)
+        elif where == "potential":
+            ls.LinearPotential([0.0, 0.0, 0.0, 1.0 + 1j])
+        else:
+            system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(I), potential=ls.LinearPotential([0, 0, 0, 1.0]))
+            kw = {"Omega0": Omega0 + 1e-3j if where == "Omega0" else Omega0,
+                  "Gamma0": Gamma0 + 1e-3j if where == "Gamma0" else Gamma0}
+            ls.integrate(system, kw["Omega0"], (0.0, 0.1), Gamma0=kw["Gamma0"], method="rkmk4", h=0.05)

@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import as_float_array, unit_vectors
 from . import _checks as C
 
 __all__ = ["Suslov3Free", "suslov3_asymptotic_points", "suslov3_energy", "suslov_asymptotic_points",
@@ -81,28 +82,45 @@ def suslov3_energy(omega: Any, J: Any) -> np.ndarray:
     return 0.5 * np.einsum("...i,ij,...j->...", w, J[:2, :2], w)
 
 
-def suslov3_asymptotic_points(J: Any, energy: Any) -> tuple[np.ndarray, np.ndarray]:
+def suslov3_asymptotic_points(J: Any, energy: Any, a: Any = None) -> tuple[np.ndarray, np.ndarray]:
     """The points ``w_+`` (limit as ``t -> +inf``) and ``w_- = -w_+`` (``t -> -inf``) on the energy ellipse.
+
+    For the constraint ``<a, omega> = 0`` with any unit vector ``a`` (default ``e3``):
+    ``w_+ = mu (a x J a)``, ``mu >= 0`` fixed by ``<J w, w>/2 = h``. (A rotation Q with ``Q a = e3``
+    maps the problem to ``a = e3`` with ``Q J Q^T``, where ``w_+ = mu e3 x (Q J Q^T) e3 = mu (-J23, J13, 0)``;
+    the cross product commutes with rotations, so ``w_+ = mu Q^T (e3 x Q J a) = mu a x J a``.)
 
     Parameters
     ----------
     J : array_like, shape (3, 3)
-        Symmetric positive definite, ``(J13, J23) != 0``.
+        Symmetric positive definite, ``a`` not an eigenvector (``a x J a != 0``).
     energy : array_like, shape (...)
         ``h >= 0``.
+    a : array_like, shape (3,), optional
+        Unit constraint vector (``|a| = 1`` within 1e-8; normalised). Default ``e3``.
 
     Returns
     -------
     w_plus, w_minus : ndarray, shape (..., 3)
-        ``w_+ = mu (-J23, J13, 0)`` with ``mu >= 0`` fixed by ``<J w, w>/2 = h``.
+        ``w_+ = mu (a x J a)``: for ``a = e3``, ``mu (-J23, J13, 0)``.
     """
-    J, JD, b = _J3(J)
+    if a is None:
+        J, _, _ = _J3(J)
+        a = np.array([0.0, 0.0, 1.0])
+    else:
+        J = C.symmetric_matrix(J, "J", n=3)
+        a = unit_vectors(as_float_array(a, "a", tail=(3,)), "a")
+        if a.ndim != 1:
+            raise ValueError(f"a must be one unit vector of shape (3,), got shape {a.shape}")
     h = C.as_array(energy, "energy")
     if np.any(h < 0.0):
         raise ValueError("energy must be nonnegative")
-    d = _R @ b
-    mu = np.sqrt(2.0 * h / (d @ JD @ d))
-    wp = np.concatenate([mu[..., None] * d, np.zeros(h.shape + (1,))], axis=-1)
+    d = np.cross(a, J @ a)
+    if np.linalg.norm(d) <= 1e-12 * np.linalg.norm(J):
+        raise ValueError("a is an eigenvector of J (a x J a = 0): omega is then constant and there are no "
+                         "asymptotic points")
+    mu = np.sqrt(2.0 * h / (d @ J @ d))
+    wp = mu[..., None] * d
     return wp, -wp
 
 

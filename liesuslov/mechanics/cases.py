@@ -67,17 +67,31 @@ class Case:
         G = None if Gamma is None else np.asarray(Gamma, dtype=float)
         return {k: np.asarray(F(x, G)) for k, F in self.integrals.items()}
 
-    def random_state(self, rng=None, batch: tuple[int, ...] = (), scale: float = 1.0):
+    def random_state(self, rng=None, batch: int | tuple[int, ...] = (), scale: float = 1.0):
         """A random admissible state: ``(omega (..., d) in D, Gamma (..., n) unit)``.
 
-        ``Gamma`` is None when the system does not need it.
+        Parameters
+        ----------
+        rng : None, int or numpy.random.Generator
+            Seed or generator (``numpy.random.default_rng(rng)``).
+        batch : int or tuple of int
+            The batch shape ``(...)``; an int ``N`` means ``(N,)`` (as numpy's ``size``).
+        scale : float
+            Standard deviation of the coordinates ``xi`` of ``omega`` in D.
+
+        Returns
+        -------
+        omega : ndarray, shape (..., d)
+        Gamma : ndarray of shape (..., n), or None
+            None when the system does not need it.
         """
         rng = np.random.default_rng(rng)
+        shape = _batch_shape(batch)
         D = self.system.constraints
-        omega = (scale * rng.standard_normal(tuple(batch) + (D.dim,))) @ D.basis
+        omega = (scale * rng.standard_normal(shape + (D.dim,))) @ D.basis
         if not self.system.needs_gamma:
             return omega, None
-        G = rng.standard_normal(tuple(batch) + (self.system.n,))
+        G = rng.standard_normal(shape + (self.system.n,))
         return omega, G / np.linalg.norm(G, axis=-1, keepdims=True)
 
 
@@ -96,6 +110,21 @@ class CaseEntry:
 
 
 # ====================================================================== helpers
+def _batch_shape(batch) -> tuple[int, ...]:
+    """A batch shape from an int ``N`` (``(N,)``) or a tuple of ints, as numpy's ``size``."""
+    if isinstance(batch, (int, np.integer)) and not isinstance(batch, bool):
+        batch = (int(batch),)
+    try:
+        if isinstance(batch, (str, bytes)):
+            raise TypeError(batch)
+        shape = tuple(int(b) for b in batch)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"batch must be an int or a tuple of ints (the batch shape), got {batch!r}") from exc
+    if any(b < 0 for b in shape):
+        raise ValueError(f"batch must not have negative sizes, got {shape}")
+    return shape
+
+
 def _energy(system: SuslovSystem) -> Integral:
     # Through the inertia operator (lazy for a mass tensor), never its dense d x d matrix.
     kinetic = system.inertia.kinetic_energy
