@@ -93,6 +93,12 @@ class Solution:
         return cls(**arrays, stats=meta["stats"], status=meta["status"], message=meta["message"],
                    n=meta["n"], algebra_name=meta["algebra_name"])
 
+    def to_xarray(self):
+        """An ``xarray.Dataset``: dims ``time``, ``batch_0``..., components (needs ``liesuslov[xarray]``)."""
+        from ..xarray_io import solution_to_xarray
+
+        return solution_to_xarray(self)
+
 
 def _jsonable(x):
     if isinstance(x, np.generic):
