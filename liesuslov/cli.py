@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from ._io import publish
+
 __all__ = ["main", "build_parser", "OUTPUT_FILES"]
 
 #: Every file ``liesuslov run`` may write into its output folder (stale ones from earlier runs are removed).
@@ -157,14 +159,10 @@ def _cmd_run(args) -> int:
     scene = _load(args.scene, t_end=args.t_end, progress=args.progress or None, backend=args.backend,
                   out_dir=args.out, figures=False if args.no_figures else None)
     out = Path(scene.out_dir)
-    _print_header(scene)
-    sol, wall = _integrate(scene)
-    if not sol.success:
-        print(f"liesuslov: error: the integration failed: {sol.message} (nothing written)", file=sys.stderr)
+    result = _integrate_and_report(scene, tol=None, failed_note=" (nothing written)")
+    if result is None:
         return 1
-    lines, _ = _report(scene, sol, wall, tol=None)
-    for line in lines:
-        print(line)
+    sol, lines, _ = result
     written = _write_outputs(scene, sol, lines, out)
     print(f"wrote {out}{os.sep}: {', '.join(written)}")
     return 0
@@ -198,6 +196,22 @@ def _print_header(scene) -> None:
     if scene.backend != "numpy" and importlib.util.find_spec("numba") is not None:
         print("(backend: the compiled kernel if the model qualifies; the first compiled run on a machine "
               "compiles it, 20-60 s, once)")
+
+
+def _integrate_and_report(scene, tol: float | None, failed_note: str = ""):
+    """The sequence shared by ``run`` and ``check``: header, integration, report.
+
+    Returns ``(sol, lines, failures)``, or None when the integration failed (the error is printed).
+    """
+    _print_header(scene)
+    sol, wall = _integrate(scene)
+    if not sol.success:
+        print(f"liesuslov: error: the integration failed: {sol.message}{failed_note}", file=sys.stderr)
+        return None
+    lines, failures = _report(scene, sol, wall, tol=tol)
+    for line in lines:
+        print(line)
+    return sol, lines, failures
 
 
 def _integrate(scene):
@@ -302,8 +316,7 @@ def _write_outputs(scene, sol, lines: list[str], out: Path) -> list[str]:
         for stale in OUTPUT_FILES:
             if stale not in names and (out / stale).is_file():
                 (out / stale).unlink()
-        for name in names:
-            os.replace(tmp / name, out / name)
+        publish(tmp, out, names)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         if created:
@@ -401,14 +414,10 @@ def _cmd_check(args) -> int:
     tol = scene.tol if args.tol is None else args.tol
     if not (np.isfinite(tol) and tol > 0):
         raise _UserError(f"--tol must be a positive number, got {args.tol!r}")
-    _print_header(scene)
-    sol, wall = _integrate(scene)
-    if not sol.success:
-        print(f"liesuslov: error: the integration failed: {sol.message}", file=sys.stderr)
+    result = _integrate_and_report(scene, tol=tol)
+    if result is None:
         return 1
-    lines, failures = _report(scene, sol, wall, tol=tol)
-    for line in lines:
-        print(line)
+    _, _, failures = result
     failures += _check_reduction(scene, tol)
     if failures:
         print(f"check FAILED (tol = {tol:g}): " + "; ".join(failures))
