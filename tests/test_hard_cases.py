@@ -120,7 +120,7 @@ def _long_params():
     for n, chart in ((3, "exp"), (4, "exp"), (3, "cayley"), (4, "cayley")):
         for backend in ("numpy", "numba"):
             if (n, chart, backend) != (3, "exp", "numba"):  # that one is tests/test_integrators.py's
-                yield pytest.param(n, chart, backend, marks=[NUMBA] if backend == "numba" else [],
+                yield pytest.param(n, chart, backend, marks=[NUMBA] if backend == "numba" else [pytest.mark.slow],
                                    id=f"n{n}-{chart}-{backend}")
 
 
