@@ -12,8 +12,8 @@ options they use ``method="rkmk853", rtol=1e-10, atol=1e-12``.
 from ._runner import DEFAULT_OPTIONS, SectionRecord
 from .lyapunov import LyapunovResult, lyapunov_exponent
 from .phase import ReconstructionPhase, axis_angle, reconstruction_phase, rotation_angles, solid_angle
-from .sections import coordinate_plane, gamma_plane, plane, poincare_section, reduced_velocity, return_plane
+from .sections import coordinate_plane, gamma_crossing, plane, poincare_section, return_plane
 
 __all__ = ["poincare_section", "reconstruction_phase", "ReconstructionPhase", "lyapunov_exponent",
-           "LyapunovResult", "plane", "coordinate_plane", "gamma_plane", "return_plane", "reduced_velocity",
+           "LyapunovResult", "plane", "coordinate_plane", "gamma_crossing", "return_plane",
            "rotation_angles", "axis_angle", "solid_angle", "SectionRecord", "DEFAULT_OPTIONS"]

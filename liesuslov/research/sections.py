@@ -2,7 +2,7 @@ r"""Poincaré sections: the crossings of a surface by a batch of trajectories, i
 
 A section is a function ``s(t, Omega, Gamma, g)`` of the state whose zero set is the surface: a callable
 with the integrator's event conventions (batch axes leading), or a linear functional of the state
-(:func:`plane`, :func:`coordinate_plane`, :func:`gamma_plane`, :func:`return_plane`), which the
+(:func:`plane`, :func:`coordinate_plane`, :func:`gamma_crossing`, :func:`return_plane`), which the
 integrator evaluates natively.
 """
 
@@ -14,7 +14,7 @@ import numpy as np
 
 from . import _runner as R
 
-__all__ = ["poincare_section", "plane", "coordinate_plane", "gamma_plane", "return_plane", "reduced_velocity"]
+__all__ = ["poincare_section", "plane", "coordinate_plane", "gamma_crossing", "return_plane"]
 
 
 def plane(omega=None, Gamma=None, g=None, offset=0.0):
@@ -40,72 +40,35 @@ def plane(omega=None, Gamma=None, g=None, offset=0.0):
     return R.make_plane(omega, Gamma, g, offset)
 
 
-def coordinate_plane(system, *, omega: int | None = None, Gamma: int | None = None, value: float = 0.0):
-    """The section ``omega_i = value`` (an algebra coordinate) or ``Gamma_i = value``.
+try:  # the integrator's built-in sections (re-exported: one implementation)
+    from ..integrators.events import coordinate_plane, gamma_crossing, return_plane
+except ImportError:  # pragma: no cover - an integrator without events: the same helpers on the fallback
+    def coordinate_plane(variable: str, index: int, value: float = 0.0, *, dim: int, terminal: bool = False,
+                         direction: int = 0):
+        """The plane ``omega[index] = value`` or ``Gamma[index] = value`` (``dim``: d or n)."""
+        if variable not in ("omega", "Gamma"):
+            raise ValueError(f"variable must be 'omega' or 'Gamma', got {variable!r}")
+        if not -dim <= index < dim:
+            raise ValueError(f"index {index} is out of range for {variable} of dimension {dim}")
+        coef = np.zeros(dim)
+        coef[index] = 1.0
+        return R.make_plane(**{variable: coef}, offset=value, direction=direction)
 
-    Parameters
-    ----------
-    system : SuslovSystem
-    omega : int, optional
-        Index of the coordinate of Omega in the algebra basis (so(3): ``(Omega_12, Omega_13, Omega_23)``).
-    Gamma : int, optional
-        Index of the component of Gamma (exactly one of ``omega``, ``Gamma``).
-    value : float
-    """
-    if (omega is None) == (Gamma is None):
-        raise ValueError("coordinate_plane needs exactly one of omega=i or Gamma=i (the index of the coordinate)")
-    d, n = system.algebra.dim, system.n
-    if omega is not None:
-        i = _index(omega, d, "omega")
-        a = np.zeros(d)
-        a[i] = 1.0
-        return R.make_plane(omega=a, offset=float(value))
-    if n is None or not system.is_so:
-        raise ValueError(f"Gamma= needs a body in SO(n); {system.algebra.name} has no Gamma")
-    i = _index(Gamma, n, "Gamma")
-    b = np.zeros(n)
-    b[i] = 1.0
-    return R.make_plane(Gamma=b, offset=float(value))
+    def gamma_crossing(n: int, index: int = -1, *, terminal: bool = False, direction: int = 0):
+        """``Gamma[index] = 0`` (default the last component, Gamma_n)."""
+        return coordinate_plane("Gamma", index, 0.0, dim=n, direction=direction)
 
-
-def gamma_plane(n: int, i: int | None = None):
-    """The section ``Gamma_i = 0`` (default ``i = n - 1``: the last component, the paper's ``Gamma_n``)."""
-    if not isinstance(n, (int, np.integer)) or n < 2:
-        raise ValueError(f"n must be an integer >= 2 (the size of Gamma), got {n!r}")
-    i = n - 1 if i is None else _index(i, n, "i")
-    b = np.zeros(n)
-    b[i] = 1.0
-    return R.make_plane(Gamma=b)
-
-
-def _index(i, size: int, name: str) -> int:
-    if isinstance(i, (bool, np.bool_)) or not isinstance(i, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer index, got {type(i).__name__}")
-    if not -size <= i < size:
-        raise ValueError(f"{name} = {i} is out of range for a vector of size {size}")
-    return int(i) % size
-
-
-def reduced_velocity(system, omega: np.ndarray, Gamma: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-    """``(d omega/dt (..., d), d Gamma/dt (..., n) or None)`` of the reduced flow at a state (coordinates)."""
-    return system.rhs(omega, Gamma)
-
-
-def return_plane(system, Omega0, Gamma0=None):
-    r"""The plane through the initial reduced state ``s0 = (omega0, Gamma0)`` normal to the reduced velocity.
-
-    ``v0 . (s - s0) = 0`` with ``v0 = (d omega/dt, d Gamma/dt)`` at ``s0``: a periodic trajectory
-    crosses it upwards (from ``v0 . (s - s0) < 0``) when it returns. One plane per trajectory of the batch.
-    """
-    b = R.prepare(system, Omega0, Gamma0)
-    xdot, Gdot = system.rhs(b.omega, b.Gamma)
-    off = np.sum(xdot * b.omega, axis=-1)
-    if Gdot is not None:
-        off = off + np.sum(Gdot * b.Gamma, axis=-1)
-    shape = b.shape
-    return R.make_plane(omega=xdot.reshape(shape + xdot.shape[-1:]),
-                        Gamma=None if Gdot is None else Gdot.reshape(shape + Gdot.shape[-1:]),
-                        offset=off.reshape(shape), direction=1)
+    def return_plane(system, Omega0, Gamma0=None, *, terminal: bool = False, direction: int = 1):
+        """The plane through each initial reduced state, normal to the reduced velocity there."""
+        b = R.prepare(system, Omega0, Gamma0)
+        xdot, Gdot = system.rhs(b.omega, b.Gamma)
+        off = np.sum(xdot * b.omega, axis=-1)
+        if Gdot is not None:
+            off = off + np.sum(Gdot * b.Gamma, axis=-1)
+        shape = b.shape
+        return R.make_plane(omega=xdot.reshape(shape + xdot.shape[-1:]),
+                            Gamma=None if Gdot is None else Gdot.reshape(shape + Gdot.shape[-1:]),
+                            offset=off.reshape(shape), direction=direction)
 
 
 def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, direction: int = 1,
@@ -121,7 +84,7 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
         ``t1 > t0``.
     section : callable or linear event
         ``section(t, Omega, Gamma, g) -> (...)`` with the integrator's event conventions (batch axes
-        leading), or a linear event (:func:`plane`, :func:`coordinate_plane`, :func:`gamma_plane`,
+        leading), or a linear event (:func:`plane`, :func:`coordinate_plane`, :func:`gamma_crossing`,
         :func:`return_plane`). A linear event's coefficients may carry the batch axes.
     Gamma0 : array_like, shape (..., n), optional
         Required when the potential needs it; given otherwise, Gamma is integrated too.
@@ -140,7 +103,7 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
 
     Examples
     --------
-    >>> rec = poincare_section(system, Omega0, (0.0, 500.0), gamma_plane(3), Gamma0=Gamma0)  # doctest: +SKIP
+    >>> rec = poincare_section(system, Omega0, (0.0, 500.0), gamma_crossing(3), Gamma0=Gamma0)  # doctest: +SKIP
     >>> rec.Gamma[rec.index == 0]                                                               # doctest: +SKIP
     """
     if isinstance(direction, (bool, np.bool_)) or direction not in (-1, 0, 1):

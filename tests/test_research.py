@@ -1,0 +1,300 @@
+"""Research tools against closed forms and independent references (never against the library itself).
+
+* The Euler top: :class:`EulerTop` against DOP853 on Euler's equations written out here; the period
+  against ``4 K(k) / lambda`` computed here from scipy's ``ellipk``; Montgomery's phase
+  ``2ET/|m| - Lambda`` against the monodromy of the reconstructed attitude, and against Landau's
+  precession integral (two independent closed forms).
+* Kharlamova: the period against the quadrature ``2 int d omega_1 / sqrt(P4)``, ``R Gamma0 = Gamma0``.
+* Lagrange: ``R e_n`` after one height period is ``e_n`` turned about ``Gamma0`` by the pendulum's azimuthal
+  advance (closed-form spherical pendulum).
+* Sections: the first integrals at every crossing equal their initial values.
+* Exponents: below a stated bound on integrable scenes, clearly positive on the generic heavy top.
+"""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.special import ellipk
+from scipy.stats import special_ortho_group
+
+import liesuslov as ls
+from liesuslov.analytic import KharlamovaMotion
+from liesuslov.analytic import pendulum as _pendulum
+from liesuslov.analytic.euler_top import EulerTop
+from liesuslov.mechanics import cases as C
+from liesuslov.research import axis_angle, gamma_crossing, plane, rotation_angles
+
+Pendulum = getattr(_pendulum, "SphericalPendulumMotion", None) or _pendulum.SphericalPendulum
+SO3 = ls.so(3)
+
+
+def coords3(w):
+    """The paper's vector w to so(3) coordinates (Omega_12, Omega_13, Omega_23) = (-w3, w2, -w1)."""
+    w = np.asarray(w, dtype=float)
+    return np.stack([-w[..., 2], w[..., 1], -w[..., 0]], axis=-1)
+
+
+def free_body(J):
+    return ls.SuslovSystem(ls.Inertia.from_principal_moments(J), constraints=ls.Subspace(SO3, np.eye(3)))
+
+
+def euler_rhs(t, w, J):
+    return np.cross(J * w, w) / J
+
+
+# ------------------------------------------------------------------------------------------ Euler top
+@pytest.mark.parametrize("J", [[1.0, 2.0, 3.0], [3.0, 1.0, 2.0], [2.0, 3.0, 1.0], [1.5, 0.7, 2.2]])
+def test_euler_top_closed_form_against_dop853(J):
+    J = np.array(J)
+    W0 = np.array([[0.3, 0.2, 1.0], [1.0, 0.4, -0.2], [-0.5, 1.0, 0.3], [0.7, 0.1, -0.9]])
+    top = EulerTop(J, W0)
+    for k, w0 in enumerate(W0):
+        ts = np.linspace(0.0, 1.5 * top.period[k], 9)
+        ref = solve_ivp(euler_rhs, (0.0, ts[-1]), w0, t_eval=ts, rtol=1e-12, atol=1e-12, args=(J,),
+                        method="DOP853")
+        assert np.max(np.abs(ref.y.T - top.state(ts)[:, k])) < 1e-9
+    # the state returns after one period (and not after half of it)
+    w_T = top.state(top.period)
+    assert np.max(np.abs(np.diagonal(w_T, axis1=0, axis2=1).T - W0)) < 1e-12
+
+
+def test_euler_top_montgomery_equals_landau_precession():
+    """Two independent closed forms of the rotation about m: Montgomery's split and Landau's phi-integral."""
+    J = np.array([1.0, 2.0, 3.0])
+    W0 = np.array([[0.3, 0.2, 1.0], [1.0, 0.4, -0.2], [0.1, -1.0, 0.2]])
+    top = EulerTop(J, W0)
+    d = np.angle(np.exp(1j * (top.dynamic_phase() - top.geometric_phase() - top.precession())))
+    assert np.max(np.abs(d)) < 1e-12
+
+
+def test_euler_top_bad_input():
+    with pytest.raises(ValueError, match="distinct"):
+        EulerTop([1.0, 1.0, 2.0], [0.1, 0.2, 0.3])
+    with pytest.raises(ValueError, match="w0"):
+        EulerTop([1.0, 2.0, 3.0], [0.0, 0.0, 0.0])
+
+
+def test_euler_top_period_from_reconstruction_against_K():
+    """reconstruction_phase finds T = 4 K(k) / lambda (Landau's formulas written out here)."""
+    I1, I2, I3 = 1.0, 2.0, 3.0
+    W0 = np.array([[0.3, 0.2, 1.0], [-0.2, 0.5, 0.9]])      # m^2 > 2 E I2: circulation about axis 3
+    E2 = np.sum(np.array([I1, I2, I3]) * W0 ** 2, axis=-1)
+    m2 = np.sum((np.array([I1, I2, I3]) * W0) ** 2, axis=-1)
+    assert np.all(m2 > E2 * I2)
+    lam = np.sqrt((I3 - I2) * (m2 - E2 * I1) / (I1 * I2 * I3))
+    k2 = (I2 - I1) * (E2 * I3 - m2) / ((I3 - I2) * (m2 - E2 * I1))
+    T = 4.0 * ellipk(k2) / lam
+    ph = ls.reconstruction_phase(free_body([I1, I2, I3]), coords3(W0))
+    assert np.all(ph.status == 0)
+    assert np.max(np.abs(ph.period - T) / T) < 1e-10
+
+
+def test_montgomery_phase_free_body():
+    """The rotation of the body about M0 after one period: 2ET/|m| - Lambda (mod 2 pi), both parts reported."""
+    J = np.array([1.0, 2.0, 3.0])
+    W0 = np.array([[0.3, 0.2, 1.0], [1.0, 0.4, -0.2], [0.1, -1.0, 0.2]])
+    top = EulerTop(J, W0)
+    g0 = special_ortho_group.rvs(3, random_state=3)
+    ph = ls.reconstruction_phase(free_body(J), coords3(W0), g0=g0)
+    assert np.all(ph.axis_kind == "momentum")
+    M0 = J * W0
+    assert np.max(np.abs(ph.axis - M0 / np.linalg.norm(M0, axis=-1, keepdims=True))) < 1e-15
+    # R fixes M0 and is the rotation about it by the phase
+    assert np.max(np.abs(np.einsum("bij,bj->bi", ph.monodromy, M0) - M0)) < 1e-8
+    expected = top.dynamic_phase() - top.geometric_phase()
+    assert np.max(np.abs(np.angle(np.exp(1j * (ph.angle - expected))))) < 1e-8
+    assert np.max(np.abs(ph.dynamic_phase - top.dynamic_phase())) < 1e-8
+    assert np.max(np.abs(ph.geometric_phase - top.geometric_phase())) < 1e-8
+    assert np.max(np.abs(ph.montgomery_defect())) < 1e-8
+    # the angles of the Schur form: one plane, |angle|
+    assert np.max(np.abs(ph.angles[:, 0] - np.abs(ph.angle))) < 1e-10
+
+
+def test_monodromy_independent_of_g0_and_given_period():
+    J = np.array([1.0, 2.0, 3.0])
+    x0 = coords3([0.3, 0.2, 1.0])
+    T = EulerTop(J, [0.3, 0.2, 1.0]).period
+    a = ls.reconstruction_phase(free_body(J), x0, period=T)
+    b = ls.reconstruction_phase(free_body(J), x0, period=T, g0=special_ortho_group.rvs(3, random_state=1))
+    assert np.max(np.abs(a.monodromy - b.monodromy)) < 1e-13
+    assert np.isnan(a.return_distance) and a.crossings == 0
+
+
+# ------------------------------------------------------------------------------------------ Kharlamova
+@pytest.mark.parametrize("n", [3, 4])
+def test_kharlamova_period_and_gamma_fixed(n):
+    I = np.arange(1.0, n + 1.0)
+    Bv = np.array([1.0, -0.7, 0.5][: n - 1])
+    case = C.kharlamova(I, Bv)
+    u0 = np.array([0.3, -0.2, 0.1][: n - 1])
+    G0 = np.zeros(n)
+    G0[0], G0[-1] = 0.6, 0.8
+    omega0 = np.zeros(case.system.algebra.dim)
+    alg = ls.so(n)
+    for i in range(n - 1):
+        omega0[alg.index(i, n - 1)] = u0[i]
+    ref = KharlamovaMotion(u0, G0, I, Bv)
+    assert ref.kind == "periodic"
+    ph = ls.reconstruction_phase(case.system, omega0, Gamma0=G0)
+    assert abs(ph.period - ref.period) < 1e-9 * ref.period
+    assert np.max(np.abs(ph.monodromy @ G0 - G0)) < 1e-8
+    if n == 3:
+        assert ph.axis_kind == "gamma"
+        assert np.max(np.abs(ph.axis - G0)) == 0.0
+
+
+# ------------------------------------------------------------------------------------------ Lagrange
+@pytest.mark.parametrize("n", [3, 4])
+def test_lagrange_monodromy_against_pendulum_precession(n):
+    """After one height period, R e_n = e_n turned about Gamma0 by the pendulum's azimuthal advance."""
+    I1, In, Bn = 1.0, 0.5, 2.0
+    case = C.lagrange(n, I1, In, Bn)
+    alg = ls.so(n)
+    u0 = np.array([0.4, -0.7, 0.3][: n - 1])
+    omega0 = np.zeros(alg.dim)
+    for i in range(n - 1):
+        omega0[alg.index(i, n - 1)] = u0[i]
+    G0 = np.zeros(n)
+    G0[0], G0[-1] = 0.6, 0.8
+    q0 = np.eye(n)[-1]                      # g0 = I: q = g e_n, v = g Omega e_n
+    v0 = alg.hat(omega0) @ q0
+    pend = Pendulum(q0, v0, G0, I1 + In, Bn)
+    T = float(pend.height_period)
+    ph = ls.reconstruction_phase(case.system, omega0, Gamma0=G0, period=T)
+    z0 = q0 @ G0
+    hq = q0 - z0 * G0
+    hv = v0 - (v0 @ G0) * G0
+    f3 = hv - (hv @ hq) / (hq @ hq) * hq
+    f3 /= np.linalg.norm(f3)
+    phi = float(pend.precession)
+    expected = z0 * G0 + np.cos(phi) * hq + np.sin(phi) * np.linalg.norm(hq) * f3
+    assert np.max(np.abs(ph.monodromy @ q0 - expected)) < 1e-8
+    assert np.max(np.abs(ph.monodromy @ G0 - G0)) > 1e-3 or n > 3  # Gamma is not periodic with T in general
+
+
+# ------------------------------------------------------------------------------------------ sections
+def test_section_first_integrals_constant_klebsh_tisserand():
+    case = C.klebsh_tisserand3([1.0, 2.0, 3.0], 1.0)
+    sysm = case.system
+    D = sysm.constraints
+    xi = np.array([[0.3, 0.5], [-0.4, 0.2], [0.8, -0.1]])
+    G0 = np.array([[0.6, 0.0, 0.8], [0.0, 0.6, 0.8], [0.48, 0.6, 0.64]])
+    omega0 = xi @ D.basis
+    rec = ls.poincare_section(sysm, omega0, (0.0, 60.0), gamma_crossing(3), Gamma0=G0)
+    assert set(np.unique(rec.index)) == {0, 1, 2}
+    assert len(rec.t) > 10
+    assert np.max(np.abs(rec.Gamma[:, 2])) < 1e-10
+    init = case.evaluate(omega0, G0)
+    at = case.evaluate(rec.omega, rec.Gamma)
+    for name in init:
+        assert np.max(np.abs(at[name] - init[name][rec.index])) < 1e-8, name
+    # sorted by (index, t), direction +1: Gamma_3 increasing through 0
+    key = rec.index * 1e6 + rec.t
+    assert np.all(np.diff(key) > 0)
+    _, dG = sysm.rhs(rec.omega, rec.Gamma)
+    assert np.all(dG[:, 2] > 0)
+
+
+def test_section_plane_with_batch_coefficients_and_callable():
+    case = C.kharlamova3([1.0, 2.0, 3.0], 1.0, 0.5)
+    sysm = case.system
+    D = sysm.constraints
+    omega0 = np.array([[0.3, 0.5], [-0.4, 0.2]]) @ D.basis
+    G0 = np.array([[0.6, 0.0, 0.8], [0.0, 0.6, 0.8]])
+    offsets = np.array([0.1, -0.1])
+    a = np.zeros((2, 3))
+    a[:, 1] = 1.0
+    rec = ls.poincare_section(sysm, omega0, (0.0, 30.0), plane(omega=a, offset=offsets), Gamma0=G0, direction=0)
+    assert np.max(np.abs(rec.omega[:, 1] - offsets[rec.index])) < 1e-10
+
+    def sec(t, Omega, Gamma, g):
+        return Gamma[..., 0]
+
+    rec2 = ls.poincare_section(sysm, omega0, (0.0, 30.0), sec, Gamma0=G0, direction=-1)
+    assert len(rec2.t) > 0 and np.max(np.abs(rec2.Gamma[:, 0])) < 1e-10
+
+
+# ------------------------------------------------------------------------------------------ exponents
+def test_lyapunov_integrable_below_bound_and_chaotic_positive():
+    """Integrable (Klebsh–Tisserand, Kharlamova): lambda(300) < 0.05; the generic heavy top: > 0.1."""
+    T = 300.0
+    G0 = np.array([0.6, 0.0, 0.8])
+    for case in (C.klebsh_tisserand3([1.0, 2.0, 3.0], 1.0), C.kharlamova3([1.0, 2.0, 3.0], 1.0, 0.5)):
+        D = case.system.constraints
+        lam = ls.lyapunov_exponent(case.system, np.array([0.3, 0.5]) @ D.basis, (0.0, T), Gamma0=G0, seed=0,
+                                   renormalize_every=2.0)
+        assert 0.0 <= lam < 0.05, (case.name, lam)
+    heavy = ls.SuslovSystem(ls.Inertia.from_principal_moments([1.0, 2.0, 3.0]), constraints=ls.Subspace(SO3, np.eye(3)),
+                            potential=ls.LinearPotential([1.0, 0.7, 0.4]))
+    res = ls.lyapunov_exponent(heavy, np.array([1.2, -0.9, 1.5]), (0.0, T), Gamma0=G0, seed=0,
+                               renormalize_every=2.0, return_history=True)
+    assert res.exponent > 0.1, res.exponent
+    assert res.spread < 0.5 * res.exponent
+
+
+# ------------------------------------------------------------------------------------------ bad input
+def test_no_return_is_a_clear_error_or_status():
+    # Suslov's problem (V = 0, a not an eigenvector): asymptotic motion, never returns
+    J = np.array([[2.0, 0.0, 0.5], [0.0, 3.0, 0.3], [0.5, 0.3, 4.0]])
+    sysm = C.suslov3(J).system
+    omega0 = np.array([0.3, 0.5]) @ sysm.constraints.basis
+    with pytest.raises(ValueError, match="t_max"):
+        ls.reconstruction_phase(sysm, omega0, t_max=30.0)
+    ph = ls.reconstruction_phase(sysm, omega0, t_max=30.0, on_failure="nan")
+    assert ph.status == 1 and np.isnan(ph.period) and np.all(np.isnan(ph.monodromy))
+
+
+def test_quasi_periodic_motion_has_no_return():
+    """Lagrange n = 3: the reduced motion lives on a 2-torus (quasi-periodic): no return within t_max."""
+    case = C.lagrange3(1.0, 0.5, 2.0)
+    omega0 = np.array([0.4, -0.7]) @ case.system.constraints.basis
+    with pytest.raises(ValueError, match="t_max = 40"):
+        ls.reconstruction_phase(case.system, omega0, Gamma0=[0.6, 0.0, 0.8], t_max=40.0)
+
+
+def test_bad_arguments():
+    J = np.array([1.0, 2.0, 3.0])
+    sysm = free_body(J)
+    x0 = coords3([0.3, 0.2, 1.0])
+    with pytest.raises(ValueError, match="h"):
+        ls.reconstruction_phase(sysm, x0, method="rkmk4")
+    with pytest.raises(ValueError, match="period"):
+        ls.reconstruction_phase(sysm, x0, period=-1.0)
+    with pytest.raises(ValueError, match="t_max"):
+        ls.reconstruction_phase(sysm, x0, t_max=0.0)
+    with pytest.raises(ValueError, match="direction"):
+        ls.poincare_section(sysm, x0, (0.0, 1.0), plane(omega=[1.0, 0.0, 0.0]), direction=2)
+    with pytest.raises(TypeError, match="section"):
+        ls.poincare_section(sysm, x0, (0.0, 1.0), "Gamma_3")
+    with pytest.raises(ValueError, match="t_span"):
+        ls.lyapunov_exponent(sysm, x0, (1.0, 0.0))
+    with pytest.raises(ValueError, match="Omega0"):
+        ls.lyapunov_exponent(ls.SuslovSystem(ls.Inertia.from_principal_moments(J)), x0, (0.0, 1.0))
+    with pytest.raises(TypeError, match="system"):
+        ls.reconstruction_phase("body", x0)
+
+
+# ------------------------------------------------------------------------------------------ linear algebra
+def test_rotation_angles_and_axis_angle():
+    rng = np.random.default_rng(0)
+    for m, angs in ((4, [2.5, 0.3]), (5, [np.pi, 1e-7]), (6, [3.0, 3.0, 0.0]), (3, [np.pi])):
+        A = np.eye(m)
+        for i, a in enumerate(angs):
+            c, s = np.cos(a), np.sin(a)
+            A[2 * i:2 * i + 2, 2 * i:2 * i + 2] = [[c, -s], [s, c]]
+        Q = special_ortho_group.rvs(m, random_state=rng)
+        got = rotation_angles(Q @ A @ Q.T)
+        assert np.max(np.abs(got - np.sort(angs)[::-1])) < 1e-7
+    axis = np.array([0.48, 0.6, 0.64])
+    for ang in (0.7, -2.9, np.pi - 1e-9):
+        Rm = ls.interop.so3_exp(ang * axis) if hasattr(ls.interop, "so3_exp") else _expm(ang * axis)
+        ax, a = axis_angle(Rm, axis)
+        assert abs(a - ang) < 1e-12
+        ax2, a2 = axis_angle(Rm)
+        assert abs(a2 - abs(ang)) < 1e-8 and np.max(np.abs(ax2 - np.sign(ang) * axis)) < 1e-6
+
+
+def _expm(v):
+    from scipy.linalg import expm
+
+    return expm(ls.hat3(v))
