@@ -1,6 +1,6 @@
 """Inertia operators J: g -> g* ≅ g, symmetric positive definite.
 
-On so(n) a rigid body has ``J(Omega) = I Omega + Omega I`` for its mass tensor I (``MATH.md``);
+On so(n) a rigid body has ``J(Omega) = I Omega + Omega I`` for its mass tensor I (``docs/concepts.md``);
 in the basis E_ij its matrix is ``K[a, b] = <E_a, I E_b + E_b I>``, diagonal ``I_i + I_j`` when
 I is diagonal. Any SPD matrix in the algebra's coordinates is an inertia operator too.
 

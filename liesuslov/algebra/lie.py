@@ -1,6 +1,6 @@
 """Finite-dimensional real Lie algebras given by structure constants.
 
-Convention (``MATH.md``): with basis ``e_1..e_d``, ``[e_i, e_j] = sum_k C[i, j, k] e_k``.
+Convention (``docs/concepts.md``): with basis ``e_1..e_d``, ``[e_i, e_j] = sum_k C[i, j, k] e_k``.
 Elements are coordinate vectors of shape ``(..., d)``; leading axes are batch axes.
 Algebras other than so(n) are identified with their dual by the Euclidean product of
 coordinates (so(n)'s pairing -1/2 tr(AB) is exactly that in its basis, see :mod:`.so`).

@@ -1,4 +1,4 @@
-"""The orthogonal algebras so(n) in the basis fixed by ``MATH.md``.
+"""The orthogonal algebras so(n) in the basis fixed by ``docs/concepts.md``.
 
 Basis ``E_ij = e_i e_j^T - e_j e_i^T`` for ``i < j`` in lexicographic order (1,2), (1,3), …,
 (1,n), (2,3), …; the coordinate of ``Omega`` on ``E_ij`` is ``Omega[i, j]``. The pairing

@@ -1,6 +1,6 @@
 """The nonholonomic body: a scene (algebra, inertia, constraints, potential, gyroscopic term).
 
-On so(n) the equations are (2.2) of the paper (conventions of ``MATH.md``)::
+On so(n) the equations are (2.2) of the paper (conventions: ``docs/concepts.md``)::
 
     dM/dt = [M, Omega] + dV/dGamma ∧ Gamma + eps * Gamma x w + sum_i lambda_i a^i,
     dGamma/dt = -Omega Gamma,      <a^i, Omega> = 0,      M = J(Omega),
