@@ -119,6 +119,21 @@ def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
                        help="integrate(backend=...): auto, numpy or numba (default: the scene's, else auto)")
     check.set_defaults(func=_cmd_check)
 
+    section = sub.add_parser("section", help="Poincaré section of a scene (crossings, integrals, figure)",
+                             description="Integrate the scene's initial state and others on its energy level "
+                                         "and write the crossings of a section (default Gamma_n = 0), the drift "
+                                         "of the first integrals there and the figure (ls.poincare_section).")
+    _research_commands().add_section_arguments(section)
+    section.set_defaults(func=_cmd_section)
+
+    phase = sub.add_parser("phase", help="period and monodromy of a scene's periodic reduced motion",
+                           description="The first return of the reduced state (Omega, Gamma), the monodromy "
+                                       "R = g(0)^-1 g(T), its rotation angles and, for the free body, "
+                                       "Montgomery's dynamic and geometric phases (ls.reconstruction_phase). "
+                                       "Exit status 1 when no return is found.")
+    _research_commands().add_phase_arguments(phase)
+    phase.set_defaults(func=_cmd_phase)
+
     bench = sub.add_parser("bench", help="work-precision benchmarks (liesuslov.bench)",
                            description="Work-precision benchmarks against scipy (see liesuslov.bench).")
     if _wants_bench(argv):
@@ -130,6 +145,20 @@ def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
             bench_module.add_arguments(bench)
             bench.set_defaults(func=bench_module.run_from_args)
     return parser
+
+
+def _research_commands():
+    from .research import commands
+
+    return commands
+
+
+def _cmd_section(args) -> int:
+    return _research_commands().run_section(args, _load, _UserError)
+
+
+def _cmd_phase(args) -> int:
+    return _research_commands().run_phase(args, _load, _UserError)
 
 
 def _wants_bench(argv: Sequence[str]) -> bool:
