@@ -12,6 +12,7 @@ import pytest
 
 import liesuslov as ls
 from liesuslov import bench
+from liesuslov.bench import targets
 
 # The numpy path: a fresh clone must not wait for the one-off compilation of an optional kernel.
 BACKEND = "numpy" if "backend" in inspect.signature(ls.integrate).parameters else None
@@ -19,7 +20,8 @@ TINY = bench.BenchConfig(
     scenes=("lagrange",), methods=("rkmk4", "rkmk853"), charts=("exp", "cayley"), scipy_methods=("DOP853",),
     fixed_factors={"rkmk4": (0.5, 4)}, tolerances={"rkmk853": (1e-5, 1e-10), "DOP853": (1e-5, 1e-10)},
     repeats=1, batch_sizes=(1, 10), batch_dims=(3,), scaling_sizes=(3, 4), long_run_steps=0, plots=False,
-    backend=BACKEND, preset="test")
+    backend=BACKEND, target_steps=200, target_batch=50, target_batch_steps=5, import_runs=1,
+    cold_compile=False, preset="test")
 
 
 @pytest.fixture(scope="module")
@@ -127,7 +129,7 @@ def test_command_line(tmp_path, capsys):
 def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch):
     cfg = bench.BenchConfig(scenes=("suslov3",), methods=("rkmk853",), scipy_methods=("DOP853",),
                             tolerances={"rkmk853": (1e-6,), "DOP853": (1e-6,)}, repeats=1, batch_sizes=(),
-                            scaling_sizes=(), long_run_steps=0, plots=False, backend=BACKEND)
+                            scaling_sizes=(), long_run_steps=0, plots=False, backend=BACKEND, targets=False)
 
     def fail(*args, **kwargs):
         raise OSError("disk full")
@@ -143,3 +145,36 @@ def test_presets():
     assert max(quick.batch_sizes) == 10_000 and max(quick.scaling_sizes) == 64
     assert set(full.methods) == set(ls.METHODS) and full.long_run_steps == 1_000_000
     assert max(full.batch_sizes) == 100_000 and max(full.scaling_sizes) == 256
+
+
+def test_targets_are_reported_as_ratios(tiny):
+    out, report, _ = tiny
+    names = [t["target"] for t in report.target_summary]
+    assert names == ["a (n = 3)", "a (n = 4)", "b", "c", "d", "e", "f (import)", "f (compile)"]
+    by = {t["target"]: t for t in report.target_summary}
+    assert by["c"]["value"] >= 1.0  # output times never save evaluations
+    assert 0.0 < by["f (import)"]["value"] < 60.0
+    assert by["f (compile)"]["met"] is None and math.isnan(by["f (compile)"]["value"])  # not measured here
+    page = (out / "docs" / "performance.md").read_text(encoding="utf-8")
+    assert "## Targets" in page and "floor" in page
+    assert "targets" in report.paths
+    if targets.have_floor():
+        assert by["a (n = 3)"]["value"] > 0 and by["b"]["value"] > 0
+        assert all(r["agrees"] for r in report.targets if "agreement" in r)
+
+
+@pytest.mark.parametrize("n", [3, 4])
+def test_floor_agrees_with_the_library(n):
+    pytest.importorskip("numba")
+    kw = {} if BACKEND is None else {"backend": BACKEND}
+    row = targets.measure_single(n, 300, 1, kw)
+    assert row["status"] == "ok" and row["floor_status"] == "ok"
+    assert row["agreement"] <= 1e-12, row
+    assert row["floor_us_per_step"] > 0 and row["ratio"] > 0
+
+
+def test_batch_floor_agrees_with_the_library():
+    pytest.importorskip("numba")
+    kw = {} if BACKEND is None else {"backend": BACKEND}
+    row = targets.measure_batch(20, 10, 1, kw)
+    assert row["status"] == "ok" and row["agreement"] <= 1e-12, row

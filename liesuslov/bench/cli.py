@@ -12,7 +12,8 @@ import numpy as np
 from .config import BenchConfig
 from .run import run_bench
 from .scenes import SCENES
-from .tables import ms
+from .tables import fmt, ms
+from .targets import AGREEMENT_TOL
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -51,6 +52,14 @@ def run_from_args(args: argparse.Namespace) -> int:
         print(f"  {r['scene']:<17} {r['level']:.0e}: liesuslov {ms(r['liesuslov_time']):>10} "
               f"({r['liesuslov_route'] or '—'}), scipy {ms(r['scipy_time']):>10} ({r['scipy_route'] or '—'}), "
               f"ratio {ratio}")
+    for r in report.targets:
+        if "agreement" in r:  # the floor must compute what the library computes, or its ratio means nothing
+            verdict = "agrees" if r["agrees"] else "DISAGREES"
+            print(f"  floor check, n = {r['n']}{', batch' if 'batch' in r else ''}: max |floor - library| = "
+                  f"{r['agreement']:.1e} ({verdict}, tolerance {AGREEMENT_TOL:.0e})")
+    for t in report.target_summary:
+        met = "—" if t["met"] is None or not np.isfinite(t["value"]) else ("met" if t["met"] else "not met")
+        print(f"  target {t['target']:<12} {fmt(t['value'], '.3g'):>8} (goal {t['goal']:g}, {met}): {t['what']}")
     for name, p in report.paths.items():
         if not name.startswith("plot"):
             print(f"wrote {p}")

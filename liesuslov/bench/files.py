@@ -80,7 +80,7 @@ def write_outputs(report: BenchReport, config: BenchConfig, out: Path, docs) -> 
                 save_fig(draw_fig(), stage / name)
         csvs = {"results": (report.rows, RESULT_COLUMNS), "ratios": (report.ratios, None),
                 "throughput": (report.throughput, None), "nscaling": (report.scaling, None),
-                "longrun": (report.longrun, None)}
+                "longrun": (report.longrun, None), "targets": (report.targets, None)}
         for name, (rows, columns) in csvs.items():
             if rows or name in ("results", "ratios"):
                 names[name] = f"{name}.csv"

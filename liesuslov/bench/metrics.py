@@ -92,14 +92,14 @@ def time_to_reach(points: Iterable[tuple[float, float]], level: float) -> float:
 
 
 def _fastest(rows: list[dict], level: float) -> tuple[float, str]:
+    """(time, route) of the route among ``rows`` that reaches ``level`` first (``inf``, "" when none does)."""
     routes: dict[str, list] = {}
     for r in rows:
         if r["status"] == "ok":
             routes.setdefault(r["route"], []).append(r)
     best, name = math.inf, ""
     for route, rs in routes.items():
-        key = (lambda r: -r["setting"]) if rs[0]["setting_kind"] == "h" else (lambda r: -r["setting"])
-        rs = sorted(rs, key=key)  # coarse to fine: decreasing h or rtol
+        rs = sorted(rs, key=lambda r: -r["setting"])  # coarse to fine: decreasing h or rtol
         t = time_to_reach([(r["error"], r["wall_time"]) for r in rs], level)
         if t < best:
             best, name = t, route
@@ -107,6 +107,7 @@ def _fastest(rows: list[dict], level: float) -> tuple[float, str]:
 
 
 def ratio_table(rows: list[dict], scenes: Sequence[str], levels: Sequence[float], refs: dict) -> list[dict]:
+    """Per scene and level: the fastest route of each library, their ratio, and the ratio to scipy's DOP853."""
     out = []
     for s in scenes:
         srows = [r for r in rows if r["scene"] == s]
@@ -114,15 +115,18 @@ def ratio_table(rows: list[dict], scenes: Sequence[str], levels: Sequence[float]
         for level in levels:
             lt, lr = _fastest([r for r in srows if r["library"] == "liesuslov"], level)
             st, sr = _fastest([r for r in srows if r["library"] == "scipy"], level)
+            dt, _ = _fastest([r for r in srows if r["route"] == "scipy DOP853"], level)
             ratio = lt / st if np.isfinite(lt) and np.isfinite(st) else float("nan")
             out.append({"scene": s, "level": level, "liesuslov_time": lt, "liesuslov_route": lr,
-                        "scipy_time": st, "scipy_route": sr, "ratio": ratio,
+                        "scipy_time": st, "scipy_route": sr, "ratio": ratio, "dop853_time": dt,
+                        "ratio_dop853": lt / dt if np.isfinite(lt) and np.isfinite(dt) else float("nan"),
                         "goal_met": bool(np.isfinite(ratio) and ratio <= GOAL_RATIO),
                         "reliable": bool(level >= 10 * unc)})
     return out
 
 
 def scaling_key(row: dict) -> str:
+    """``"backend/chart"`` of an n-scaling row (the chart alone when the library's default backend ran)."""
     return f"{row['requested']}/{row['chart']}" if row.get("requested", "default") != "default" else row["chart"]
 
 

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+from . import targets
 from .config import BenchConfig, BenchReport, integrate_kwargs
 from .files import write_outputs
 from .machine import machine_info
@@ -71,7 +72,7 @@ def run_bench(out_dir, *, quick: bool = False, scenes: Sequence[str] | None = No
     plans = {k: plan_tasks(config, built[k]) for k in config.scenes}
     total = (sum(len(p) + 1 for p in plans.values()) + len(config.batch_sizes) * len(config.batch_dims)
              + len(config.scaling_sizes) * len(config.charts) * len(scaling_backends(config))
-             + (1 if config.long_run_steps else 0))
+             + (1 if config.long_run_steps else 0) + (5 if config.targets else 0))
     bar = _bar(total, progress)
 
     def tick(desc: str | None = None) -> None:
@@ -95,10 +96,15 @@ def run_bench(out_dir, *, quick: bool = False, scenes: Sequence[str] | None = No
         report.scaling = scaling_sweep(config, extra_kw, lambda: tick("n-scaling"))
         report.scaling_exponent = fit_exponent(report.scaling)
         report.longrun = long_run(config, extra_kw, lambda: tick("long run"))
+        if config.targets:
+            report.targets = targets.run_targets(config, extra_kw, lambda: tick("targets"))
     finally:
         if bar is not None:
             bar.close()
     report.ratios = ratio_table(report.rows, config.scenes, config.levels, report.references)
+    if config.targets:
+        report.target_summary = targets.summary(report.targets, report.scaling_exponent, report.scaling,
+                                                report.ratios)
     report.elapsed = time.perf_counter() - start
     write_outputs(report, config, out, docs)
     return report

@@ -225,10 +225,14 @@ def throughput_sweep(config: BenchConfig, extra_kw: dict, tick: Callable[[], Non
 
 
 def scaling_backends(config: BenchConfig) -> tuple[str | None, ...]:
-    """Backends of the n-scaling sweep: the configured one, else numpy and the default ("auto") if both exist."""
+    """Backends of the n-scaling sweep: the configured one, else numpy and the compiled one (numba, target (d))."""
     if config.backend is not None or not has_backend_option():
         return (config.backend,)
-    return ("numpy", "auto")
+    from .targets import have_floor
+
+    # Asked for by name, not "auto": target (d) is the compiled path's growth, and a fallback to numpy
+    # would hide where it stops (the row records the reason instead).
+    return ("numpy", "numba") if have_floor() else ("numpy",)
 
 
 def scaling_sweep(config: BenchConfig, extra_kw: dict, tick: Callable[[], None]) -> list[dict]:

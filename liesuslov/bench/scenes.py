@@ -362,3 +362,83 @@ def throughput_case(n: int):
     import liesuslov as ls
 
     return ls.cases.lagrange(3, 1.0, 0.5, 1.0) if n == 3 else kt_system(4)
+
+
+# ---------------------------------------------------------------------- the floor's scenes
+#: Step of every floor comparison (issue 10's measurement).
+FLOOR_H = 0.005
+
+
+@dataclass(frozen=True)
+class FloorScene:
+    """A scene the plain compiled loop (:mod:`.floor`) integrates with exactly the library's field.
+
+    Attributes
+    ----------
+    key, title : str
+    n : int
+        SO(n).
+    system : SuslovSystem
+    Omega0 : ndarray, shape (n, n)
+    Gamma0 : ndarray, shape (n,), or None
+    x0 : ndarray
+        The floor's initial vector: the angular velocity w (n = 3) or xi = (Omega_i4) (n = 4).
+    coeffs : ndarray, shape (3,)
+        The floor's field coefficients (Euler's a_i, or c_i = (B_i - B_4) / (I_i + I_4)).
+    vector : callable
+        ``Omega (..., n, n) -> (..., 3)``: the floor's vector read off the library's Omega.
+    """
+
+    key: str
+    title: str
+    n: int
+    system: Any
+    Omega0: np.ndarray
+    Gamma0: np.ndarray | None
+    x0: np.ndarray
+    coeffs: np.ndarray
+    vector: Callable
+
+
+def _vee3(Omega: np.ndarray) -> np.ndarray:
+    """w with Omega = hat(w) (so(3))."""
+    return np.stack([Omega[..., 2, 1], Omega[..., 0, 2], Omega[..., 1, 0]], axis=-1)
+
+
+def hat3(w: np.ndarray) -> np.ndarray:
+    """hat(w) for w (..., 3)."""
+    z = np.zeros(w.shape[:-1])
+    return np.stack([np.stack([z, -w[..., 2], w[..., 1]], -1), np.stack([w[..., 2], z, -w[..., 0]], -1),
+                     np.stack([-w[..., 1], w[..., 0], z], -1)], axis=-2)
+
+
+def floor_free_body() -> FloorScene:
+    """The free rigid body in SO(3) of the euler-top scene (mass tensor diag(1, 2, 3.5), no constraint)."""
+    import liesuslov as ls
+
+    Id = np.array([1.0, 2.0, 3.5])
+    J = Id.sum() - Id  # principal moments: J w' = (J w) x w
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag(Id)), constraints=ls.Subspace(ls.so(3), np.eye(3)))
+    w0 = np.array([0.8, 0.6, 0.5])
+    a = np.array([(J[1] - J[2]) / J[0], (J[2] - J[0]) / J[1], (J[0] - J[1]) / J[2]])
+    return FloorScene("free-body-3", "free rigid body, n = 3", 3, system, hat3(w0), None, w0, a, _vee3)
+
+
+def floor_klebsh_tisserand() -> FloorScene:
+    """The Klebsh–Tisserand body in SO(4) of the default scene of ``liesuslov run``."""
+    import liesuslov as ls
+
+    I = np.array([1.0, 1.5, 2.0, 0.5])
+    B = np.array([4.0, 3.0, 2.5, 1.0])
+    system = ls.cases.klebsh_tisserand(I, B).system
+    xi0 = np.array([0.3, -0.2, 0.25])
+    Gamma0 = np.array([0.2, -0.4, 0.4, 0.8])
+    Omega0 = np.zeros((4, 4))
+    Omega0[:3, 3], Omega0[3, :3] = xi0, -xi0
+    c = (B[:-1] - B[-1]) / (I[:-1] + I[-1])
+    return FloorScene("klebsh-tisserand-4", "Klebsh–Tisserand, n = 4", 4, system, Omega0,
+                      Gamma0 / np.linalg.norm(Gamma0), xi0, c, lambda Om: Om[..., :3, 3])
+
+
+#: n -> the scene of the one-trajectory floor comparison.
+FLOOR_SCENES: dict[int, Callable[[], FloorScene]] = {3: floor_free_body, 4: floor_klebsh_tisserand}

@@ -60,6 +60,18 @@ def _memory_budget() -> int:
     return int(min(avail // 2, 8 << 30))
 
 
+def child_env(**extra: str) -> dict:
+    """The environment of a child process: this one's, with ``extra`` set and this liesuslov importable.
+
+    The child must import the same liesuslov, also when it runs from a source tree that is not installed.
+    """
+    env = dict(os.environ)
+    root = str(Path(__file__).resolve().parents[2])
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env.update(extra)
+    return env
+
+
 def _resolve(spec: str) -> Callable[..., dict]:
     """The measurement function named ``"module:function"``."""
     module, name = spec.split(":")
@@ -77,10 +89,7 @@ def guarded(fn: Callable[..., dict], kwargs: dict, *, isolate: bool, timeout: fl
             return fn(**kwargs)
         except (MemoryError, ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
             return {"status": "failed", "message": f"{type(exc).__name__}: {exc}"}
-    env = dict(os.environ)
-    # The child must import this liesuslov, also when it runs from a source tree that is not installed.
-    root = str(Path(__file__).resolve().parents[2])
-    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env = child_env()
     payload = json.dumps({"fn": f"{fn.__module__}:{fn.__name__}", "kwargs": kwargs, "budget": _memory_budget()})
     try:
         res = subprocess.run([sys.executable, "-c", f"from {__name__} import child_main; child_main()"],

@@ -1,0 +1,280 @@
+"""The targets of issue 10, measured as ratios (the machine is shared: absolute times drift, ratios less).
+
+* (a) one trajectory, n = 3 and n = 4, RKMK4 with reconstruction, h = 0.005: the library's time per step
+  over the floor's (:mod:`.floor`, a plain compiled loop of the same method; goal ≤ 3);
+* (b) a batch of 10⁴ free bodies, n = 3: the library's ns per trajectory-step over the single-threaded
+  floor's (goal ≤ 1, the library using every core);
+* (c) an adaptive run (the default scene of ``liesuslov run``: Klebsh–Tisserand in SO(4), rkmk853,
+  rtol 1e-10) with 500 output times: its field evaluations over those of the same run reporting the end
+  point only (goal ≤ 1.2);
+* (d) Fedorov–Kozlov with reconstruction up to n = 256 with ``backend="numba"``: the growth exponent of
+  the cost per step, from the n-scaling sweep (goal about 2);
+* (e) work-precision: the fastest liesuslov route over scipy's DOP853 at equal error, worst over every
+  scene and level 1e-5 … 1e-10 (goal ≤ 0.1 compiled);
+* (f) cold start: ``import liesuslov`` in a fresh process (goal ≤ 0.3 s) and the first compiled call in a
+  fresh process with an empty numba cache (goal ≤ 10 s), and in the next process (loading that cache).
+
+Every comparison with the floor also checks that the two computed the same numbers (to 1e-12): a
+ratio to a loop that computes something else would mean nothing.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import tempfile
+from collections.abc import Callable
+
+import numpy as np
+
+from .scenes import FLOOR_H, FLOOR_SCENES, floor_free_body, floor_klebsh_tisserand, hat3
+from .timing import child_env, timed
+
+#: The floor and the library must agree to this (largest absolute difference of the state and of g).
+AGREEMENT_TOL = 1e-12
+#: Steps of a floor timing run at least (its per-step cost is ~0.1 µs: shorter runs time the call).
+_FLOOR_MIN_STEPS = 100_000
+#: Output times of target (c) and its interval.
+DENSE_POINTS, DENSE_T1 = 500, 50.0
+#: The goals, as the table states them.
+GOALS = {"a": 3.0, "b": 1.0, "c": 1.2, "d": 2.0, "e": 0.1, "f-import": 0.3, "f-compile": 10.0}
+
+
+def have_floor() -> bool:
+    """Whether the floor can run (it is compiled by numba, the ``fast`` extra)."""
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _floor_run(n: int, x0: np.ndarray, coeffs: np.ndarray, Gamma0, steps: int):
+    """(vector, g) after ``steps`` floor steps from the identity: one trajectory."""
+    from . import floor
+
+    x = np.array(x0, dtype=float)
+    g = np.eye(n)
+    if n == 3:
+        floor.free3_steps(x, g, coeffs, FLOOR_H, steps)
+    else:
+        floor.kt4_steps(x, g, np.array(Gamma0, dtype=float), coeffs, FLOOR_H, steps, True)
+    return x, g
+
+
+def _agreement(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> float:
+    return max(float(np.max(np.abs(a[0] - b[0]))), float(np.max(np.abs(a[1] - b[1]))))
+
+
+def measure_single(n: int, steps: int, repeats: int, extra_kw: dict) -> dict:
+    """Target (a): one trajectory of ``steps`` RKMK4 steps, library against floor (time per step, agreement)."""
+    import liesuslov as ls
+
+    sc = FLOOR_SCENES[n]()
+    t1 = steps * FLOOR_H
+
+    def run():
+        return ls.integrate(sc.system, sc.Omega0, (0.0, t1), Gamma0=sc.Gamma0, reconstruct=True, method="rkmk4",
+                            h=FLOOR_H, t_eval=[t1], **extra_kw)
+    sol, wall, count = timed(run, repeats)
+    row = {"target": "a", "n": n, "scene": sc.title, "steps": steps, "lib_us_per_step": wall / steps * 1e6,
+           "repeats": count, "backend": sol.stats.get("backend", "numpy"),
+           "status": "ok" if sol.success else "failed", "message": "" if sol.success else sol.message}
+    if not have_floor():
+        return {**row, "floor_status": "numba is not installed"}
+    lib_state = (sc.vector(sol.Omega[-1]), sol.g[-1])
+    same = _agreement(lib_state, _floor_run(n, sc.x0, sc.coeffs, sc.Gamma0, steps))
+    fsteps = max(steps, _FLOOR_MIN_STEPS)
+    _, fwall, _ = timed(lambda: _floor_run(n, sc.x0, sc.coeffs, sc.Gamma0, fsteps), max(repeats, 5))
+    floor_us = fwall / fsteps * 1e6
+    return {**row, "floor_us_per_step": floor_us, "ratio": row["lib_us_per_step"] / floor_us, "agreement": same,
+            "agrees": bool(same <= AGREEMENT_TOL), "floor_status": "ok"}
+
+
+def _batch_state(batch: int) -> np.ndarray:
+    """Initial angular velocities of the batch: the free body's w0, perturbed (seeded)."""
+    w0 = floor_free_body().x0
+    return w0 + 0.1 * np.random.default_rng(10).standard_normal((batch, 3))
+
+
+def measure_batch(batch: int, steps: int, repeats: int, extra_kw: dict) -> dict:
+    """Target (b): ``batch`` free bodies, n = 3, ``steps`` RKMK4 steps; ns per trajectory-step, agreement."""
+    import liesuslov as ls
+
+    sc = floor_free_body()
+    W0 = _batch_state(batch)
+    t1 = steps * FLOOR_H
+
+    def run():
+        return ls.integrate(sc.system, hat3(W0), (0.0, t1), reconstruct=True, method="rkmk4", h=FLOOR_H,
+                            t_eval=[t1], **extra_kw)
+    sol, wall, count = timed(run, repeats)
+    ts = batch * steps
+    row = {"target": "b", "n": 3, "batch": batch, "steps": steps, "lib_ns_per_traj_step": wall / ts * 1e9,
+           "repeats": count, "backend": sol.stats.get("backend", "numpy"),
+           "status": "ok" if sol.success else "failed", "message": "" if sol.success else sol.message}
+    if not have_floor():
+        return {**row, "floor_status": "numba is not installed"}
+    from . import floor
+
+    def floor_batch():
+        W, G = W0.copy(), np.broadcast_to(np.eye(3), (batch, 3, 3)).copy()
+        floor.free3_batch(W, G, sc.coeffs, FLOOR_H, steps)
+        return W, G
+    (W, G), fwall, _ = timed(floor_batch, max(repeats, 3))
+    same = _agreement((sc.vector(sol.Omega[-1]), sol.g[-1]), (W, G))
+    floor_ns = fwall / ts * 1e9
+    return {**row, "floor_ns_per_traj_step": floor_ns, "ratio": row["lib_ns_per_traj_step"] / floor_ns,
+            "agreement": same, "agrees": bool(same <= AGREEMENT_TOL), "floor_status": "ok"}
+
+
+def measure_dense_output(extra_kw: dict) -> dict:
+    """Target (c): nfev of the default scene with 500 output times over nfev with the end point only."""
+    import liesuslov as ls
+
+    sc = floor_klebsh_tisserand()
+
+    def run(t_eval):
+        return ls.integrate(sc.system, sc.Omega0, (0.0, DENSE_T1), Gamma0=sc.Gamma0, reconstruct=True,
+                            method="rkmk853", rtol=1e-10, atol=1e-12, t_eval=t_eval, **extra_kw)
+    dense = run(np.linspace(0.0, DENSE_T1, DENSE_POINTS))
+    end = run([DENSE_T1])
+    ok = dense.success and end.success
+    return {"target": "c", "nfev_dense": int(dense.stats["nfev"]), "nfev_end": int(end.stats["nfev"]),
+            "steps_dense": int(dense.stats["steps"]), "steps_end": int(end.stats["steps"]),
+            "ratio": dense.stats["nfev"] / end.stats["nfev"],
+            "end_difference": _agreement((dense.omega[-1], dense.g[-1]), (end.omega[-1], end.g[-1])),
+            "status": "ok" if ok else "failed", "message": "" if ok else f"{dense.message}; {end.message}"}
+
+
+_IMPORT_SCRIPT = "import time; t = time.perf_counter(); import liesuslov; print(time.perf_counter() - t)"
+# The first compiled call a user makes: the default scene of `liesuslov run` on the compiled backend.
+_COMPILE_SCRIPT = """import time
+import numpy as np
+import liesuslov as ls
+I = np.array([1.0, 1.5, 2.0, 0.5]); B = np.array([4.0, 3.0, 2.5, 1.0])
+system = ls.cases.klebsh_tisserand(I, B).system
+Omega0 = np.zeros((4, 4)); Omega0[:3, 3] = [0.3, -0.2, 0.25]; Omega0[3, :3] = -Omega0[:3, 3]
+Gamma0 = np.array([0.2, -0.4, 0.4, 0.8]); Gamma0 /= np.linalg.norm(Gamma0)
+t = time.perf_counter()
+sol = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, reconstruct=True, method="rkmk853", rtol=1e-10,
+                   atol=1e-12, backend="numba")
+print(time.perf_counter() - t, sol.stats.get("backend"))
+"""
+
+
+def _child_seconds(script: str, timeout: float, **env: str) -> tuple[float, str]:
+    """(seconds printed by ``script`` run in a fresh interpreter, rest of its line); NaN and the reason on failure."""
+    try:
+        res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=timeout,
+                             env=child_env(**env), check=False)
+    except subprocess.TimeoutExpired:
+        return math.nan, f"time limit: not done in {timeout:.0f} s"
+    if res.returncode != 0 or not res.stdout.strip():
+        return math.nan, (res.stderr.strip().splitlines() or [f"exit status {res.returncode}"])[-1][:300]
+    first, *rest = res.stdout.strip().splitlines()[-1].split()
+    return float(first), " ".join(rest)
+
+
+def measure_cold_start(compile_first_call: bool, timeout: float, repeats: int = 3) -> dict:
+    """Target (f): ``import liesuslov`` in fresh processes (the fastest of ``repeats``) and, if asked, the
+    first compiled call in a fresh process with an empty numba cache and in the next one (cache loaded)."""
+    imports = [_child_seconds(_IMPORT_SCRIPT, timeout)[0] for _ in range(repeats)]
+    row = {"target": "f", "import_s": min(imports), "import_runs": len(imports)}
+    if not compile_first_call:
+        return {**row, "compile_status": "not measured (--quick)"}
+    if not have_floor():
+        return {**row, "compile_status": "numba is not installed"}
+    with tempfile.TemporaryDirectory(prefix="liesuslov-numba-cache-") as cache:
+        cold, why = _child_seconds(_COMPILE_SCRIPT, timeout, NUMBA_CACHE_DIR=cache)
+        warm, why2 = _child_seconds(_COMPILE_SCRIPT, timeout, NUMBA_CACHE_DIR=cache)
+    ok = math.isfinite(cold) and math.isfinite(warm)
+    return {**row, "first_call_cold_s": cold, "first_call_cached_s": warm,
+            "compile_status": "ok" if ok else f"failed: {why if not math.isfinite(cold) else why2}",
+            "compiled_backend": why if ok else ""}
+
+
+def run_targets(config, extra_kw: dict, tick: Callable[[], None]) -> list[dict]:
+    """Measure targets (a), (b), (c) and (f) (rows of :func:`measure_single` etc.); (d), (e) come from the sweeps."""
+    rows = []
+    for n in (3, 4):
+        rows.append(_safe(lambda n=n: measure_single(n, config.target_steps, config.repeats, extra_kw),
+                          {"target": "a", "n": n}))
+        tick()
+    rows.append(_safe(lambda: measure_batch(config.target_batch, config.target_batch_steps, config.repeats, extra_kw),
+                      {"target": "b", "n": 3, "batch": config.target_batch}))
+    tick()
+    rows.append(_safe(lambda: measure_dense_output(extra_kw), {"target": "c"}))
+    tick()
+    rows.append(_safe(lambda: measure_cold_start(config.cold_compile, config.isolated_timeout,
+                                                      config.import_runs), {"target": "f"}))
+    tick()
+    return rows
+
+
+def _safe(measure: Callable[[], dict], head: dict) -> dict:
+    """A measurement's row, or ``head`` with a failed status naming the exception (one target never stops the rest)."""
+    try:
+        return measure()
+    except (ValueError, RuntimeError, MemoryError, np.linalg.LinAlgError) as exc:
+        return {**head, "status": "failed", "message": f"{type(exc).__name__}: {exc}"}
+
+
+def summary(target_rows: list[dict], scaling_exponent: dict, scaling: list[dict], ratios: list[dict]) -> list[dict]:
+    """One row per target: what, the measured ratio (or seconds), the goal and whether it is met."""
+    by = {(r["target"], r.get("n")): r for r in target_rows}
+    out = []
+
+    def add(key: str, what: str, value: float, goal: float, detail: str, met: bool | None = None) -> None:
+        if met is None:
+            met = bool(value <= goal) if np.isfinite(value) else None  # None: not measured
+        out.append({"target": key, "what": what, "value": value, "goal": goal, "met": met, "detail": detail})
+
+    for n in (3, 4):
+        r = by.get(("a", n), {})
+        add(f"a (n = {n})", f"one trajectory, n = {n}, RKMK4 + g, h = {FLOOR_H}: library / floor per step",
+            r.get("ratio", math.nan), GOALS["a"],
+            f"{_num(r.get('lib_us_per_step'))} µs vs {_num(r.get('floor_us_per_step'), '.3g')} µs per step "
+            f"({r.get('backend', '?')}, {r.get('steps', '?')} steps); floor = library to "
+            f"{_num(r.get('agreement'), '.1e')}" + _status(r))
+    r = by.get(("b", 3), {})
+    add("b", f"batch of {r.get('batch', '?')}, n = 3: library / single-threaded floor per trajectory-step",
+        r.get("ratio", math.nan), GOALS["b"],
+        f"{_num(r.get('lib_ns_per_traj_step'))} ns vs {_num(r.get('floor_ns_per_traj_step'))} ns "
+        f"({r.get('backend', '?')}); floor = library to {_num(r.get('agreement'), '.1e')}" + _status(r))
+    r = by.get(("c", None), {})
+    add("c", f"adaptive, {DENSE_POINTS} output times: nfev / nfev of the end point only", r.get("ratio", math.nan),
+        GOALS["c"], f"{r.get('nfev_dense', '?')} vs {r.get('nfev_end', '?')} evaluations, {r.get('steps_dense', '?')} "
+        f"vs {r.get('steps_end', '?')} steps (rkmk853, rtol 1e-10, default scene)" + _status(r))
+    fit = scaling_exponent.get("numba/exp") or scaling_exponent.get("exp")
+    ran = [x for x in scaling if x.get("requested") == "numba" and x.get("chart") == "exp" and x.get("status") == "ok"]
+    nmax = max((x["n"] for x in ran), default=None)
+    reached = nmax is not None and nmax >= 256
+    add("d", "Fedorov–Kozlov + g, backend numba, to n = 256: exponent of the cost per step",
+        fit["exponent"] if fit else math.nan, GOALS["d"],
+        (f"fit over n = {fit['sizes']}; " if fit else "no fit; ") + f"largest n on numba: {nmax or '—'}",
+        met=bool(reached and fit["exponent"] <= GOALS["d"] + 0.3) if fit else None)
+    finite = [x for x in ratios if np.isfinite(x.get("ratio_dop853", math.nan))]
+    worst = max(finite, key=lambda x: x["ratio_dop853"], default=None)
+    add("e", "work-precision: fastest liesuslov / scipy DOP853 at equal error, worst of 1e-5 … 1e-10",
+        worst["ratio_dop853"] if worst else math.nan, GOALS["e"],
+        (f"worst at {worst['scene']} {worst['level']:.0e}; best "
+         f"{min(x['ratio_dop853'] for x in finite):.3f}" if worst else "no level reached by both"))
+    r = by.get(("f", None), {})
+    add("f (import)", "`import liesuslov` in a fresh process (s)", r.get("import_s", math.nan), GOALS["f-import"],
+        f"fastest of {r.get('import_runs', '?')} processes" + _status(r))
+    add("f (compile)", "first compiled call, fresh process, empty numba cache (s)",
+        r.get("first_call_cold_s", math.nan), GOALS["f-compile"],
+        f"then {_num(r.get('first_call_cached_s'))} s in the next process (cache on disk); "
+        f"{r.get('compile_status', '')}")
+    return out
+
+
+def _num(x, spec: str = ".4g") -> str:
+    return format(float(x), spec) if isinstance(x, (int, float, np.floating)) and np.isfinite(x) else "—"
+
+
+def _status(r: dict) -> str:
+    bad = [r[k] for k in ("status", "floor_status") if r.get(k) not in (None, "ok")]
+    return f"; {'; '.join(str(b) for b in bad)}{': ' + r['message'] if r.get('message') else ''}" if bad else ""
