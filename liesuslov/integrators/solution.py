@@ -31,11 +31,16 @@ class Solution:
     g : ndarray, shape (N, ..., n, n), or None
         The attitude (in the algebra's matrix representation), when reconstructed.
     stats : dict
-        ``nfev`` (vector-field evaluations; one batched call counts once), ``steps`` (accepted),
-        ``rejected``, ``method``, ``chart``, ``form``, ``state_dim``, ``batch``, ``wall_time``.
-    status : int
-        0 success, -1 failure (see ``message``).
+        ``nfev``, ``steps`` (accepted), ``rejected`` summed over the trajectories, and per trajectory
+        ``trajectory_nfev``, ``trajectory_steps``, ``trajectory_rejected`` and ``t_stop`` (...); ``method``,
+        ``chart``, ``form``, ``backend`` (``"numba"`` or ``"numpy"``), ``backend_reason``, ``kernel``,
+        ``state_dim``, ``batch``, ``wall_time``.
+    status : ndarray of int, shape (...)
+        Per trajectory: 0 reached the end of t_span, 1 stopped by a terminal event, -1 failed (the time is
+        ``stats["t_stop"]``, the reason in ``message``). Every output after a trajectory stopped is NaN.
     message : str
+    events : list of EventRecord
+        One record per event function passed to ``integrate`` (empty without events).
     n : int or None
         Matrix size of the representation (n for so(n)); used by :attr:`Omega`.
     """
@@ -46,15 +51,42 @@ class Solution:
     Gamma: np.ndarray | None = None
     g: np.ndarray | None = None
     stats: dict = field(default_factory=dict)
-    status: int = 0
+    status: np.ndarray | int = 0
     message: str = "The solver successfully reached the end of the integration interval."
     n: int | None = None
     algebra_name: str = ""
+    events: list = field(default_factory=list)
+    _dense: object = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        self.status = np.asarray(self.status, dtype=np.int64)
 
     @property
     def success(self) -> bool:
-        """True when the integration reached the end of ``t_span``."""
-        return self.status == 0
+        """True iff no trajectory failed (every status >= 0)."""
+        return bool(np.all(self.status >= 0))
+
+    def at(self, t) -> Solution:
+        """The state at times ``t`` (M,) inside t_span, as a Solution (``integrate(..., dense_output=True)``).
+
+        From the method's continuous extension in the chart, ``g = g_k phi(Theta(theta))`` and
+        ``Gamma = phi(-Theta(theta)) Gamma_k``: g in SO(n) and |Gamma| = 1 to rounding, the constraints exact,
+        with the accuracy of the steps; NaN after a trajectory stopped. The steps are those of the original
+        run (the solve is repeated with ``t`` as output times: a trajectory's steps do not depend on them).
+
+        Raises
+        ------
+        ValueError
+            Without ``dense_output=True``, or for a time outside t_span.
+        """
+        if self._dense is None:
+            raise ValueError("sol.at(t) needs integrate(..., dense_output=True)")
+        return self._dense(t)
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state["_dense"] = None  # the replay holds the solver and the problem: not part of the result
+        return state
 
     @property
     def Omega(self) -> np.ndarray | None:
@@ -79,7 +111,7 @@ class Solution:
         """Write every array, the stats and the status to a ``.npz`` file (lossless round trip)."""
         path = Path(path)
         arrays = {name: getattr(self, name) for name in _ARRAYS if getattr(self, name) is not None}
-        meta = {"stats": self.stats, "status": self.status, "message": self.message, "n": self.n,
+        meta = {"stats": self.stats, "status": self.status.tolist(), "message": self.message, "n": self.n,
                 "algebra_name": self.algebra_name}
         np.savez(path, **arrays, __meta__=np.array(json.dumps(meta, default=_jsonable)))
         return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")

@@ -116,6 +116,9 @@ class ButcherTableau:
         Continuous-extension coefficients, ``b(theta) = dense @ [theta, ..., theta**m]``.
     dense_order : int or None
         Order of the continuous extension (set iff ``dense`` is).
+    dense_A, dense_c : ndarray or None
+        The extra stages of a continuous extension (DOP853's three): rows over stages ``0 … s + e``
+        (stage ``s`` is the derivative at the new point), and their nodes.
 
     Derived (not constructor arguments)
     -----------------------------------
@@ -148,6 +151,8 @@ class ButcherTableau:
     E5: np.ndarray | None = None
     dense: np.ndarray | None = None
     dense_order: int | None = None
+    dense_A: np.ndarray | None = None
+    dense_c: np.ndarray | None = None
     stages: int = field(init=False)
     a_rows: tuple[np.ndarray, ...] = field(init=False)
     e: np.ndarray | None = field(init=False)
@@ -209,12 +214,26 @@ class ButcherTableau:
             raise ValueError(f"ButcherTableau field 'fsal' is {self.fsal!r} but the structure says "
                              f"{fsal_structure} (FSAL means A[-1] == b and c[-1] == 1)")
 
-        dense = None
+        dense = dense_A = dense_c = None
+        if (self.dense_A is None) != (self.dense_c is None):
+            raise ValueError("ButcherTableau fields 'dense_A' and 'dense_c' go together: give both or neither")
+        if self.dense_A is not None:
+            dense_A = _frozen(self.dense_A, "dense_A")
+            e = dense_A.shape[0]
+            if dense_A.ndim != 2 or dense_A.shape[1] != s + 1 + e:
+                raise ValueError(f"ButcherTableau field 'dense_A' must have shape (e, {s} + 1 + e), got "
+                                 f"{dense_A.shape}")
+            if np.any(np.triu(dense_A, s + 1) != 0):
+                raise ValueError("ButcherTableau field 'dense_A' must be explicit (row i reads stages < s + 1 + i)")
+            dense_c = _frozen(self.dense_c, "dense_c", (e,))
         if self.dense is not None:
             dense = _frozen(self.dense, "dense")
-            if dense.ndim != 2 or dense.shape[0] != s:
-                raise ValueError(f"ButcherTableau field 'dense' must have shape ({s}, m), got {dense.shape}")
-            if not np.allclose(dense.sum(axis=1), b, rtol=0, atol=1e3 * _RTOL):
+            rows = s if dense_A is None else s + 1 + dense_A.shape[0]
+            if dense.ndim != 2 or dense.shape[0] != rows:
+                raise ValueError(f"ButcherTableau field 'dense' must have shape ({rows}, m), got {dense.shape}")
+            b_full = np.zeros(rows)
+            b_full[:s] = b
+            if not np.allclose(dense.sum(axis=1), b_full, rtol=0, atol=1e3 * _RTOL):
                 raise ValueError("ButcherTableau field 'dense' must give b(1) == b (rows summing to b)")
         if (dense is None) != (self.dense_order is None):
             raise ValueError("ButcherTableau field 'dense_order' must be given exactly when 'dense' is")
@@ -228,6 +247,8 @@ class ButcherTableau:
         put(self, "E3", E3)
         put(self, "E5", E5)
         put(self, "dense", dense)
+        put(self, "dense_A", dense_A)
+        put(self, "dense_c", dense_c)
         put(self, "stages", s)
         rows = []
         for i in range(s):
@@ -479,6 +500,89 @@ def _dop853_e3() -> np.ndarray:
     return E3
 
 
+# Hairer's 7th-order continuous extension of DOP853 (dop853.f, CONTD8): three extra stages after the
+# derivative at the new point (stage 12) and the coefficients d of the interpolant's top four terms
+# (literals as in scipy's dop853_coefficients.py, rows 13–15 of its A and its D).
+_DOP853_DENSE_C = (0.1, 0.2, 0.777777777777777777777777777778)
+_DOP853_DENSE_ROWS = (
+    {0: 5.61675022830479523392909219681e-2, 6: 2.53500210216624811088794765333e-1,
+     7: -2.46239037470802489917441475441e-1, 8: -1.24191423263816360469010140626e-1,
+     9: 1.5329179827876569731206322685e-1, 10: 8.20105229563468988491666602057e-3,
+     11: 7.56789766054569976138603589584e-3, 12: -8.298e-3},
+    {0: 3.18346481635021405060768473261e-2, 5: 2.83009096723667755288322961402e-2,
+     6: 5.35419883074385676223797384372e-2, 7: -5.49237485713909884646569340306e-2,
+     10: -1.08347328697249322858509316994e-4, 11: 3.82571090835658412954920192323e-4,
+     12: -3.40465008687404560802977114492e-4, 13: 1.41312443674632500278074618366e-1},
+    {0: -4.28896301583791923408573538692e-1, 5: -4.69762141536116384314449447206,
+     6: 7.68342119606259904184240953878, 7: 4.06898981839711007970213554331,
+     8: 3.56727187455281109270669543021e-1, 12: -1.39902416515901462129418009734e-3,
+     13: 2.9475147891527723389556272149, 14: -9.15095847217987001081870187138},
+)
+_DOP853_D = (
+    {0: -0.84289382761090128651353491142e1, 5: 0.56671495351937776962531783590,
+     6: -0.30689499459498916912797304727e1, 7: 0.23846676565120698287728149680e1,
+     8: 0.21170345824450282767155149946e1, 9: -0.87139158377797299206789907490,
+     10: 0.22404374302607882758541771650e1, 11: 0.63157877876946881815570249290,
+     12: -0.88990336451333310820698117400e-1, 13: 0.18148505520854727256656404962e2,
+     14: -0.91946323924783554000451984436e1, 15: -0.44360363875948939664310572000e1},
+    {0: 0.10427508642579134603413151009e2, 5: 0.24228349177525818288430175319e3,
+     6: 0.16520045171727028198505394887e3, 7: -0.37454675472269020279518312152e3,
+     8: -0.22113666853125306036270938578e2, 9: 0.77334326684722638389603898808e1,
+     10: -0.30674084731089398182061213626e2, 11: -0.93321305264302278729567221706e1,
+     12: 0.15697238121770843886131091075e2, 13: -0.31139403219565177677282850411e2,
+     14: -0.93529243588444783865713862664e1, 15: 0.35816841486394083752465898540e2},
+    {0: 0.19985053242002433820987653617e2, 5: -0.38703730874935176555105901742e3,
+     6: -0.18917813819516756882830838328e3, 7: 0.52780815920542364900561016686e3,
+     8: -0.11573902539959630126141871134e2, 9: 0.68812326946963000169666922661e1,
+     10: -0.10006050966910838403183860980e1, 11: 0.77771377980534432092869265740,
+     12: -0.27782057523535084065932004339e1, 13: -0.60196695231264120758267380846e2,
+     14: 0.84320405506677161018159903784e2, 15: 0.11992291136182789328035130030e2},
+    {0: -0.25693933462703749003312586129e2, 5: -0.15418974869023643374053993627e3,
+     6: -0.23152937917604549567536039109e3, 7: 0.35763911791061412378285349910e3,
+     8: 0.93405324183624310003907691704e2, 9: -0.37458323136451633156875139351e2,
+     10: 0.10409964950896230045147246184e3, 11: 0.29840293426660503123344363579e2,
+     12: -0.43533456590011143754432175058e2, 13: 0.96324553959188282948394950600e2,
+     14: -0.39177261675615439165231486172e2, 15: -0.14972683625798562581422125276e3},
+)
+
+
+def _dop853_dense() -> tuple[np.ndarray, np.ndarray]:
+    """The extra stages' rows (3, 16) and the weights ``dense`` (16, 7) of ``y(t + x h) = y + h sum_j b_j(x) k_j``.
+
+    Hairer's interpolant is ``x (F0 + (1-x) (F1 + x (F2 + (1-x) (F3 + x (F4 + (1-x) (F5 + x F6))))))`` with
+    ``F0 = dy``, ``F1 = h k_0 - dy``, ``F2 = 2 dy - h (k_12 + k_0)``, ``F3..F6 = h d k`` and ``dy = h b k``; each
+    ``F`` is ``h`` times a weight vector over the 16 stages, so expanding the nested product gives b_j(x).
+    """
+    S = 16
+    rows = np.zeros((3, S))
+    for r, row in enumerate(_DOP853_DENSE_ROWS):
+        for j, v in row.items():
+            rows[r, j] = v
+    b = np.zeros(S)
+    b[:12] = _DOP853_B
+    e0, e12 = np.eye(S)[0], np.eye(S)[12]
+    F = [b, e0 - b, 2 * b - e12 - e0]
+    for drow in _DOP853_D:
+        d = np.zeros(S)
+        for j, v in drow.items():
+            d[j] = v
+        F.append(d)
+    x = np.polynomial.Polynomial([0.0, 1.0])
+    one_minus_x = 1.0 - x
+    poly = [np.polynomial.Polynomial([0.0]) for _ in range(S)]
+    for i, f in enumerate(reversed(F)):  # evaluated stage by stage: the weights are polynomials in x
+        fac = x if i % 2 == 0 else one_minus_x
+        poly = [(p + f[j]) * fac for j, p in enumerate(poly)]
+    dense = np.zeros((S, 7))
+    for j, p in enumerate(poly):
+        coef = np.zeros(8)
+        coef[: len(p.coef)] = p.coef
+        dense[j] = coef[1:8]  # no constant term: b_j(0) = 0
+    return rows, dense
+
+
+_DOP853_DENSE_A, _DOP853_DENSE = _dop853_dense()
+
 DOP853 = ButcherTableau(
     "dop853",
     A=_lower(_DOP853_ROWS),
@@ -488,6 +592,10 @@ DOP853 = ButcherTableau(
     error_order=7,
     E3=_dop853_e3(),
     E5=_DOP853_E5,
+    dense=_DOP853_DENSE,
+    dense_order=7,
+    dense_A=_DOP853_DENSE_A,
+    dense_c=_DOP853_DENSE_C,
 )
 """Dormand–Prince 8(5,3) as in Hairer's DOP853: 12 stages; not FSAL (the derivative at the new point,
 a 13th evaluation Hairer reuses as the next stage 0, is not needed by the step or its error estimate)."""

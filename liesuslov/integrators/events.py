@@ -1,0 +1,214 @@
+"""Events: surfaces ``event(t, Omega, Gamma, g) = 0`` crossed by a trajectory, located on its continuous extension.
+
+scipy's conventions: an event is a callable with optional attributes ``terminal`` (bool: stop the
+trajectory at its first crossing) and ``direction`` (+1: only crossings where the value goes up, -1:
+down, 0: both). It is called with the batch axes leading — ``t`` a float or (B,) per trajectory, ``Omega``
+(B, n, n) (coordinates (B, d) on algebras other than so(n)), ``Gamma`` (B, n) or None, ``g`` (B, m, m) or
+None — and returns (B,) values. A crossing is a sign change of the value between two accepted steps; its
+time is located by a bracketing root finder on the continuous extension to near rounding in t. A value
+exactly 0 at t0 is not a crossing (a trajectory that starts on the surface has not crossed it).
+
+:class:`LinearEvent` — a linear function of the state, ``a . omega + b . Gamma + sum(c * g) - offset`` — is
+what the built-in helpers return and what the compiled kernel evaluates natively; any other callable
+runs on the numpy solver. :class:`EventRecord` holds the located crossings.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["EventRecord", "LinearEvent", "coordinate_plane", "gamma_crossing", "return_plane", "event_flags"]
+
+
+@dataclass
+class EventRecord:
+    """The crossings of one event function, for all trajectories, sorted by (index, t).
+
+    Attributes
+    ----------
+    t : (K,) ndarray
+    index : (K,) ndarray of int
+        Flat (C-order) batch index of the trajectory that crossed.
+    omega : (K, d) ndarray
+        Coordinates of Omega at the crossing.
+    Gamma : (K, n) ndarray or None
+    g : (K, m, m) ndarray or None
+    n : int or None
+        Matrix size (for :attr:`Omega`).
+    algebra_name : str
+    """
+
+    t: np.ndarray
+    index: np.ndarray
+    omega: np.ndarray
+    Gamma: np.ndarray | None = None
+    g: np.ndarray | None = None
+    n: int | None = None
+    algebra_name: str = ""
+
+    @property
+    def Omega(self) -> np.ndarray | None:
+        """Omega at the crossings as skew matrices (K, n, n) on so(n); None on other algebras."""
+        if not self.algebra_name.startswith("so(") or self.n is None:
+            return None
+        from ..algebra import so
+
+        return so(self.n).hat(self.omega)
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def __repr__(self) -> str:
+        return f"EventRecord({len(self)} crossings of {len(np.unique(self.index))} trajectories)"
+
+
+def event_flags(event) -> tuple[bool, int]:
+    """``(terminal, direction)`` of an event callable (scipy's attributes; defaults False and 0).
+
+    Raises
+    ------
+    TypeError
+        If ``event`` is not callable.
+    ValueError
+        If ``direction`` is not -1, 0 or +1.
+    """
+    if not callable(event):
+        raise TypeError(f"events must be callables event(t, Omega, Gamma, g) (or a list of them), got "
+                        f"{type(event).__name__}")
+    terminal = bool(getattr(event, "terminal", False))
+    direction = getattr(event, "direction", 0)
+    try:
+        direction = float(direction)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"event.direction must be -1, 0 or +1, got {direction!r}") from exc
+    if direction not in (-1.0, 0.0, 1.0):
+        raise ValueError(f"event.direction must be -1, 0 or +1, got {direction!r}")
+    return terminal, int(direction)
+
+
+class LinearEvent:
+    """The event ``a . omega + b . Gamma + sum(c * g) - offset`` (a hyperplane in the state).
+
+    Parameters
+    ----------
+    omega : array_like, shape (..., d), optional
+        Coefficients ``a`` on Omega's coordinates in the algebra basis.
+    Gamma : array_like, shape (..., n), optional
+        Coefficients ``b`` on the vertical (body frame).
+    g : array_like, shape (..., m, m), optional
+        Coefficients ``c`` on the attitude's entries.
+    offset : float or array_like, shape (...)
+    terminal : bool
+    direction : {-1, 0, 1}
+
+    Leading axes are batch axes: a per-trajectory plane (e.g. through each initial state) broadcasts
+    against the batch of ``integrate``.
+
+    Notes
+    -----
+    Callable like any event: ``event(t, Omega, Gamma, g)`` with Omega as skew matrices or coordinates.
+    The compiled kernel reads the coefficients instead of calling it.
+    """
+
+    def __init__(self, omega=None, Gamma=None, g=None, offset=0.0, *, terminal: bool = False,
+                 direction: int = 0) -> None:
+        if omega is None and Gamma is None and g is None:
+            raise ValueError("LinearEvent needs at least one of omega=, Gamma=, g= (its coefficients)")
+        self.omega = None if omega is None else _real(omega, "omega")
+        self.Gamma = None if Gamma is None else _real(Gamma, "Gamma")
+        self.g = None if g is None else _real(g, "g")
+        self.offset = _real(offset, "offset")
+        self.terminal = bool(terminal)
+        self.direction = direction
+        event_flags(self)
+
+    def __call__(self, t, Omega, Gamma, g):
+        val = -self.offset
+        if self.omega is not None:
+            x = np.asarray(Omega)
+            if x.ndim >= 2 and x.shape[-1] == x.shape[-2] and x.shape[-1] != self.omega.shape[-1]:
+                from ..algebra import so
+
+                x = so(x.shape[-1]).vee(x)
+            val = val + np.sum(self.omega * x, axis=-1)
+        if self.Gamma is not None:
+            if Gamma is None:
+                raise ValueError("this LinearEvent reads Gamma, but the scene has none")
+            val = val + np.sum(self.Gamma * Gamma, axis=-1)
+        if self.g is not None:
+            if g is None:
+                raise ValueError("this LinearEvent reads g: integrate with reconstruct=True")
+            val = val + np.sum(self.g * g, axis=(-2, -1))
+        return val
+
+    def __repr__(self) -> str:
+        parts = [name for name in ("omega", "Gamma", "g") if getattr(self, name) is not None]
+        return f"LinearEvent({'+'.join(parts)}, terminal={self.terminal}, direction={self.direction})"
+
+
+def _real(x, name: str) -> np.ndarray:
+    arr = np.asarray(x)
+    if np.iscomplexobj(arr) or not np.issubdtype(arr.dtype, np.number):
+        raise TypeError(f"LinearEvent {name} must be real numbers, got dtype {arr.dtype}")
+    arr = arr.astype(float)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"LinearEvent {name} must be finite")
+    return arr
+
+
+def coordinate_plane(variable: str, index: int, value: float = 0.0, *, dim: int, terminal: bool = False,
+                     direction: int = 0) -> LinearEvent:
+    """The plane ``omega[index] = value`` or ``Gamma[index] = value``.
+
+    Parameters
+    ----------
+    variable : {"omega", "Gamma"}
+    index : int
+        Component (negative counts from the end, ``-1`` is Gamma_n).
+    value : float
+    dim : int
+        The dimension of the variable (d for omega, n for Gamma).
+    """
+    if variable not in ("omega", "Gamma"):
+        raise ValueError(f"variable must be 'omega' or 'Gamma', got {variable!r}")
+    if not -dim <= index < dim:
+        raise ValueError(f"index {index} is out of range for {variable} of dimension {dim}")
+    coef = np.zeros(dim)
+    coef[index] = 1.0
+    return LinearEvent(**{variable: coef}, offset=value, terminal=terminal, direction=direction)
+
+
+def gamma_crossing(n: int, index: int = -1, *, terminal: bool = False, direction: int = 0) -> LinearEvent:
+    """``Gamma[index] = 0`` (default the last component, Gamma_n: the Klebsh–Tisserand section)."""
+    return coordinate_plane("Gamma", index, 0.0, dim=n, terminal=terminal, direction=direction)
+
+
+def return_plane(system, Omega0, Gamma0=None, *, terminal: bool = False, direction: int = 1) -> LinearEvent:
+    """The plane through each initial reduced state, normal to the reduced velocity there.
+
+    ``<v0, (omega, Gamma) - (omega0, Gamma0)> = 0`` with ``v0 = (d omega / dt, d Gamma / dt)`` at t0: the
+    flow crosses it upward at t0, so the first upward crossing after t0 is a first return (for a
+    periodic reduced motion, at its period). Batch axes of Omega0 and Gamma0 give one plane per trajectory.
+
+    Parameters
+    ----------
+    system : SuslovSystem
+    Omega0 : array_like, shape (..., n, n) or (..., d)
+    Gamma0 : array_like, shape (..., n), optional
+    """
+    from .integrate import initial_velocity
+
+    omega0, Gamma0_, domega, dGamma = initial_velocity(system, Omega0, Gamma0)
+    offset = np.sum(domega * omega0, axis=-1)
+    kwargs = {"omega": domega}
+    if Gamma0_ is not None:
+        kwargs["Gamma"] = dGamma
+        offset = offset + np.sum(dGamma * Gamma0_, axis=-1)
+    scale = np.sqrt(np.sum(domega ** 2, axis=-1) + (np.sum(dGamma ** 2, axis=-1) if Gamma0_ is not None else 0.0))
+    if np.any(scale == 0):
+        raise ValueError("return_plane: the initial state is an equilibrium (zero velocity); no section "
+                         "through it is transverse to the flow")
+    kwargs = {key: v / scale[..., None] for key, v in kwargs.items()}
+    return LinearEvent(**kwargs, offset=offset / scale, terminal=terminal, direction=direction)

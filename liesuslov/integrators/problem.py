@@ -1,0 +1,175 @@
+"""The problem a solver is handed, and what a solver hands back — the contract between the front door and the solvers.
+
+:func:`liesuslov.integrate` validates the user's call and builds a :class:`Problem`: the model, the group
+part and its chart, the flattened batch of initial states, the method's :class:`~.plan.StagePlan`, the
+tolerances, the output times and the events. A solver (:func:`.solve_numpy.solve` or the compiled
+:func:`.kernel.solve`) returns a :class:`RawResult`; :mod:`.integrate` turns it into a
+:class:`~.solution.Solution`. Solvers know nothing of Gamma, g or the batch shape beyond what is here.
+
+The state of one trajectory is ``(xi, G)``:
+
+* ``xi`` (k,): coordinates of Omega in the constraint subspace D (a vector space, advanced by classical RK);
+* ``G`` (q,): the group part, flattened — the attitude g (q = m*m, row-major) when ``mode == "g"``, the
+  vertical Gamma (q = n) when ``mode == "gamma"``, nothing (q = 0) when ``mode == "none"``.
+
+With ``mode == "g"`` and a vertical, ``gamma`` (n,) is the vertical in space (constant, ``gamma = g0 Gamma0``)
+and the body vertical is read off the attitude, ``Gamma = g^T gamma``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .plan import StagePlan
+
+__all__ = ["Problem", "RawResult", "STATUS_FAILED", "STATUS_REACHED", "STATUS_TERMINAL", "FAILURES",
+           "RENORM_EVERY"]
+
+STATUS_REACHED, STATUS_TERMINAL, STATUS_FAILED = 0, 1, -1
+
+#: Why a trajectory failed (``RawResult.failure`` codes; 0 = did not fail).
+FAILURES = {
+    1: "non-finite state or field",
+    2: "step size underflow",
+    3: "max_steps reached",
+    4: "step beyond the chart's domain (|Theta| >= pi for the exponential): lower h",
+}
+
+#: Products ``g <- g phi(Theta)`` add ~1e-16 per step to |g^T g - I|; with ``reproject`` a Newton–Schulz step
+#: (g, or Gamma / |Gamma|) every max(RENORM_EVERY, n) accepted steps keeps it at ~1e-15 over any run length.
+RENORM_EVERY = 64
+
+
+@dataclass(eq=False)
+class Problem:
+    """Everything a solver needs; arrays are C-contiguous float64 (int64 where said).
+
+    Attributes
+    ----------
+    model : ModelProtocol
+        The reduced model (``xi_dot``, ``omega_matrix``, ...).
+    mode : {"none", "gamma", "g"}
+    chart : {"exp", "cayley"} or None
+        None when ``mode == "none"``.
+    kind : str or None
+        The group representation the kernel uses: "so3" (closed forms), "so4", "dense", "lowrank"
+        (Fedorov–Kozlov, rank-2 Omega), or None (mode "none").
+    skew : bool
+        The algebra is so(n) (skew matrices); False for se(2), se(3) and other matrix algebras.
+    plan : StagePlan
+    k, m, q : int
+        Dimension of xi, matrix size of the group part (0 for mode "none"), length of G.
+    B : int
+        Number of trajectories (the flattened batch).
+    xi0 : (B, k)
+    G0 : (B, q)
+    gamma : (B, n) or (B, 0)
+        The vertical in space (mode "g" with a vertical), else empty.
+    t0, t1 : float
+        Common to the batch; ``t1 < t0`` integrates backward.
+    adaptive : bool
+    h : float
+        Fixed step (fixed-step methods) or the first step (adaptive; 0 = Hairer's estimate).
+    rtol, atol : float
+    max_steps : int
+        Per trajectory (accepted + rejected steps).
+    t_eval : (M,) or None
+        Output times (sorted in the direction of integration); None: the solver records every accepted
+        step (``B == 1`` only) — the front door passes ``t_eval = (t0, t1)`` for a batch without t_eval.
+    events : list of callables
+        The user's event functions (numpy solver).
+    event_linear : list over events of ``(coef (B, k + q), offset (B,))`` or None
+        The linear form of each :class:`~.events.LinearEvent` (None for any other callable).
+    event_coef : (B, E, k + q) or None
+        Every event is linear in the state: ``value = event_coef[b, e] . (xi, G) - event_offset[b, e]``
+        (what the compiled kernel evaluates). None when some event is not a :class:`~.events.LinearEvent`.
+    event_offset : (B, E)
+    event_terminal : (E,) int64 (0/1)
+    event_direction : (E,) int64 (-1, 0, +1)
+    reproject : bool
+        Re-orthonormalise g (or renormalise Gamma) every ``max(RENORM_EVERY, m)`` accepted steps.
+    """
+
+    model: object
+    mode: str
+    chart: str | None
+    kind: str | None
+    skew: bool
+    plan: StagePlan
+    k: int
+    m: int
+    q: int
+    B: int
+    xi0: np.ndarray
+    G0: np.ndarray
+    gamma: np.ndarray
+    t0: float
+    t1: float
+    adaptive: bool
+    h: float
+    rtol: float
+    atol: float
+    max_steps: int
+    t_eval: np.ndarray | None
+    events: list = field(default_factory=list)
+    event_linear: list = field(default_factory=list)
+    event_coef: np.ndarray | None = None
+    event_offset: np.ndarray | None = None
+    event_terminal: np.ndarray | None = None
+    event_direction: np.ndarray | None = None
+    reproject: bool = True
+
+    @property
+    def direction(self) -> float:
+        return 1.0 if self.t1 > self.t0 else -1.0
+
+    @property
+    def n_events(self) -> int:
+        return len(self.events)
+
+
+@dataclass(eq=False)
+class RawResult:
+    """What a solver returns (flattened batch of B trajectories, M output times).
+
+    Attributes
+    ----------
+    t : (M,)
+        The output times: ``problem.t_eval``, or every accepted step of the one trajectory.
+    xi : (M, B, k)
+    G : (M, B, q)
+        NaN at output times after a trajectory stopped (terminal event or failure).
+    status : (B,) int64
+        0 reached t1, 1 stopped by a terminal event, -1 failed.
+    t_stop : (B,)
+        Where each trajectory stopped (t1, the terminal event's time, or the failure time).
+    failure : (B,) int64
+        A key of :data:`FAILURES` (0 = none).
+    nfev, steps, rejected : (B,) int64
+        Field evaluations (stage 0 reused per the plan's new-point rule), accepted and rejected steps.
+    event_t : list over events of (K,) arrays
+        Crossing times, sorted by (trajectory index, t).
+    event_index : list of (K,) int64
+        The trajectory (flat batch index) of each crossing.
+    event_xi : list of (K, k)
+    event_G : list of (K, q)
+    backend : str
+        "numpy" or "numba".
+    """
+
+    t: np.ndarray
+    xi: np.ndarray
+    G: np.ndarray
+    status: np.ndarray
+    t_stop: np.ndarray
+    failure: np.ndarray
+    nfev: np.ndarray
+    steps: np.ndarray
+    rejected: np.ndarray
+    event_t: list = field(default_factory=list)
+    event_index: list = field(default_factory=list)
+    event_xi: list = field(default_factory=list)
+    event_G: list = field(default_factory=list)
+    backend: str = "numpy"
