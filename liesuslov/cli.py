@@ -119,6 +119,34 @@ def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
                        help="integrate(backend=...): auto, numpy or numba (default: the scene's, else auto)")
     check.set_defaults(func=_cmd_check)
 
+    ens = sub.add_parser("ensemble", help="integrate N perturbed copies of a scene's initial state (ls.ensemble)",
+                         description="Integrate N initial states drawn around the scene's (Omega0 + scale * z "
+                                     "along the constraint subspace, z standard normal; Gamma0 perturbed by "
+                                     "scale * w and renormalised; g0 kept: liesuslov.ensemble.Perturbation), "
+                                     "reproducibly from --seed whatever --workers, on W worker processes, "
+                                     "streaming the two ends of t_span (or only the final state) to a store "
+                                     "folder read back by ls.open_ensemble(DIR). Exit status 1 if a trajectory "
+                                     "failed.")
+    ens.add_argument("scene", nargs="?", default=None, help="a scene TOML file (default: the built-in scene)")
+    ens.add_argument("--n", type=int, default=1000, metavar="N", help="number of trajectories (default 1000)")
+    ens.add_argument("--workers", type=int, default=0, metavar="W",
+                     help="0: in this process (default); W >= 1: a local Dask cluster of W processes "
+                          "(liesuslov[distributed]), else a process pool")
+    ens.add_argument("--out", metavar="DIR", default="liesuslov-out/ensemble",
+                     help="the store folder (replaced if it holds an ensemble; default liesuslov-out/ensemble)")
+    ens.add_argument("--scale", type=float, default=1e-2, help="standard deviation of the perturbation (0.01)")
+    ens.add_argument("--seed", type=int, default=0, help="root seed of the draws (default 0)")
+    ens.add_argument("--chunk-size", type=int, default=None, metavar="C", help="trajectories per task")
+    ens.add_argument("--final", action="store_true", help="keep only the final state (reduce='final')")
+    ens.add_argument("--executor", choices=("auto", "dask", "process"), default="auto",
+                     help="with W >= 1: dask (LocalCluster), process (ProcessPoolExecutor) or auto (dask if "
+                          "installed)")
+    ens.add_argument("--t-end", type=float, metavar="T", default=None, help="integrate up to t = T instead")
+    ens.add_argument("--progress", action="store_true", help="show a progress bar (needs tqdm)")
+    ens.add_argument("--backend", default=None, metavar="NAME",
+                     help="integrate(backend=...): auto, numpy or numba (default: the scene's, else auto)")
+    ens.set_defaults(func=_cmd_ensemble)
+
     section = sub.add_parser("section", help="Poincaré section of a scene (crossings, integrals, figure)",
                              description="Integrate the scene's initial state and others on its energy level "
                                          "and write the crossings of a section (default Gamma_n = 0), the drift "
@@ -564,3 +592,61 @@ def _potential_table(p) -> Any:
         B = p.diagonal if p.diagonal is not None else p.matrix
         return {"kind": "quadratic", "B": np.asarray(B).tolist()}
     return "none"
+
+
+# ====================================================================== ensemble
+def _cmd_ensemble(args) -> int:
+    from .ensemble import Perturbation, ensemble
+
+    for name, value, low in (("--n", args.n, 1), ("--workers", args.workers, 0)):
+        if value < low:
+            raise _UserError(f"{name} must be >= {low}, got {value}")
+    scene = _load(args.scene, t_end=args.t_end, backend=args.backend)
+    system, kw = scene.build()
+    sampler = Perturbation.around(system, kw.pop("Omega0"), Gamma0=kw.pop("Gamma0", None), g0=kw.pop("g0", None),
+                                  scale=args.scale)
+    t_span = kw.pop("t_span")
+    for key in ("t_eval", "progress"):  # the ensemble records the ends of t_span; its own bar replaces integrate's
+        kw.pop(key, None)
+    executor, where, close = _ensemble_executor(args.workers, args.executor)
+    start = time.perf_counter()
+    try:
+        ens = ensemble(system, None, t_span, sampler=sampler, n=args.n, seed=args.seed, chunk_size=args.chunk_size,
+                       executor=executor, store=args.out, overwrite=True, reduce="final" if args.final else None,
+                       progress=args.progress, **kw)
+    finally:
+        close()
+    wall = time.perf_counter() - start
+    ok = int(np.count_nonzero(ens.status >= 0))
+    print(f"{scene.name}: {ok}/{args.n} trajectories reached t = {t_span[1]:g} in {wall:.1f} s "
+          f"({args.n / wall:,.0f}/s, {where}); seed {args.seed}, scale {args.scale:g}")
+    if not ens.success:
+        print(f"liesuslov: error: {args.n - ok} trajectories failed: {ens.message}", file=sys.stderr)
+    print(f"wrote {args.out}{os.sep} (read it with liesuslov.open_ensemble({str(args.out)!r}))")
+    return 0 if ens.success else 1
+
+
+def _ensemble_executor(workers: int, kind: str):
+    """(executor, description, close) for ``liesuslov ensemble --workers W --executor KIND``."""
+    if workers == 0:
+        return None, "in process", lambda: None
+    if kind in ("auto", "dask"):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:
+            if kind == "dask":
+                raise _UserError("--executor dask needs dask.distributed: "
+                                 "pip install 'liesuslov[distributed]'") from None
+        else:
+            cluster = LocalCluster(n_workers=workers, processes=True, threads_per_worker=1, dashboard_address=None,
+                                   host="127.0.0.1")
+            client = Client(cluster)
+
+            def close() -> None:
+                client.close()
+                cluster.close()
+            return client, f"a local Dask cluster of {workers} processes", close
+    from concurrent.futures import ProcessPoolExecutor
+
+    pool = ProcessPoolExecutor(workers)
+    return pool, f"a pool of {workers} processes", pool.shutdown

@@ -122,8 +122,8 @@ def import_geomstats() -> ModuleType:
             import geomstats.geometry.skew_symmetric_matrices
             import geomstats.geometry.special_orthogonal  # noqa: F401
         except ImportError as exc:
-            raise ImportError("liesuslov.interop needs geomstats: pip install 'geomstats==2.8.0' "
-                              "(with numpy < 2.4)") from exc
+            raise ImportError("liesuslov.interop needs geomstats, an optional extra: pip install "
+                              "'liesuslov[geomstats]' (geomstats 2.8.0, which needs numpy < 2.4)") from exc
     backend = _loaded_backend()
     if backend != "numpy":  # pragma: no cover - only if geomstats changes how it picks a backend
         raise RuntimeError(f"geomstats loaded the backend {backend!r}; {_HOW_TO_FIX}")
@@ -150,8 +150,39 @@ def geomstats_skew_symmetric_matrices(n: int) -> Any:
         return SkewSymmetricMatrices(n)
 
 
-def geomstats_hypersphere(n: int) -> Any:
-    """geomstats' ``Hypersphere(dim=n - 1)``: the unit vectors of R^n (where Γ lives), n >= 2."""
+def geomstats_hypersphere(n: int | None = None, *, dim: int | None = None) -> Any:
+    """geomstats' ``Hypersphere(dim=n - 1)``: the unit vectors of R^n (where Γ of an SO(n) body lives).
+
+    Give the ambient dimension ``n`` (the length of Γ) or, as geomstats' own ``Hypersphere(dim)`` takes
+    it, the dimension ``dim = n - 1`` of the sphere: ``geomstats_hypersphere(3)`` and
+    ``geomstats_hypersphere(dim=2)`` are both S^2 in R^3. Passing both is allowed only when they agree,
+    since a sphere of the wrong size silently answers ``belongs = False`` for every point.
+
+    Parameters
+    ----------
+    n : int, optional
+        Ambient dimension, n >= 2.
+    dim : int, optional (keyword)
+        Dimension of the sphere, dim >= 1.
+
+    Raises
+    ------
+    TypeError
+        If neither is given.
+    ValueError
+        If both are given and ``dim != n - 1``, or either is out of range.
+    """
+    if n is None and dim is None:
+        raise TypeError("geomstats_hypersphere needs the ambient dimension n (the length of Gamma) or, as "
+                        "geomstats' Hypersphere(dim) takes it, dim = n - 1 (keyword)")
+    if dim is not None:
+        if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or dim < 1:
+            raise ValueError(f"dim (the sphere's dimension, n - 1) must be an integer >= 1, got {dim!r}")
+        if n is not None and n != dim + 1:
+            raise ValueError(f"n = {n} (ambient dimension) and dim = {dim} (sphere dimension) disagree: dim must be "
+                             f"n - 1; pass one of them (geomstats_hypersphere({dim + 1}) or dim={dim} is S^{dim} "
+                             f"in R^{dim + 1})")
+        n = int(dim) + 1
     n = so(n).n
     import_geomstats()
     from geomstats.geometry.hypersphere import Hypersphere

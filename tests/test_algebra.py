@@ -88,6 +88,7 @@ def geomstats_mods():
     old_env = os.environ.get("GEOMSTATS_BACKEND")
     os.environ["GEOMSTATS_BACKEND"] = "numpy"
     try:
+        pytest.importorskip("geomstats", reason="geomstats is the optional extra liesuslov[geomstats]")
         from geomstats.geometry.invariant_metric import InvariantMetric
         from geomstats.geometry.skew_symmetric_matrices import SkewSymmetricMatrices
         from geomstats.geometry.special_orthogonal import SpecialOrthogonal

@@ -176,3 +176,27 @@ def test_scene_run_matches_cli_trajectory(tmp_path, capsys):
 
     sol = load_scene(SCENES / "suslov3.toml").with_options(t_end=1.0).run()
     np.testing.assert_array_equal(saved.omega, sol.omega)
+
+
+# ---------------------------------------------------------------------------- ensemble
+def test_ensemble_command_writes_a_store_reproducible_across_workers(tmp_path, capsys):
+    base = [str(SCENES / "suslov3.toml"), "--n", "12", "--t-end", "0.3", "--seed", "4", "--chunk-size", "5"]
+    assert cli.main(["ensemble", *base, "--workers", "0", "--out", str(tmp_path / "a")]) == 0
+    out = capsys.readouterr().out
+    assert "12/12 trajectories reached t = 0.3" in out and "open_ensemble" in out
+    assert cli.main(["ensemble", *base, "--workers", "1", "--executor", "process", "--final",
+                     "--out", str(tmp_path / "b")]) == 0
+    a, b = ls.open_ensemble(tmp_path / "a"), ls.open_ensemble(tmp_path / "b")
+    assert a.omega.shape == (2, 12, 3) and b.omega.shape == (1, 12, 3) and a.g.shape == (2, 12, 3, 3)
+    assert np.array_equal(a.omega[-1:], b.omega) and np.all(a.status == 0)
+    # the draws are around the scene's state, inside the constraint subspace
+    scene = ls.load_scene(SCENES / "suslov3.toml")
+    D = scene.system.constraints
+    assert np.allclose(D.project(a.omega[0]), a.omega[0], rtol=0, atol=1e-14)
+    assert 0 < np.abs(a.omega[0] - scene.omega0).max() < 0.1
+
+
+def test_ensemble_command_bad_arguments_exit_2(tmp_path, capsys):
+    assert cli.main(["ensemble", str(SCENES / "suslov3.toml"), "--n", "0", "--out", str(tmp_path)]) == 2
+    assert "--n must be >= 1" in capsys.readouterr().err
+    assert cli.main(["ensemble", str(SCENES / "suslov3.toml"), "--workers", "-1", "--out", str(tmp_path)]) == 2

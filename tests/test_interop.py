@@ -19,6 +19,16 @@ from hypothesis.extra import numpy as hnp
 import liesuslov as ls
 from liesuslov import interop
 
+# geomstats is an optional extra (it pins numpy < 2.4): the tests that call it are skipped without it
+try:
+    import importlib.util
+
+    HAS_GEOMSTATS = importlib.util.find_spec("geomstats") is not None
+except ValueError:  # pragma: no cover - a broken install
+    HAS_GEOMSTATS = False
+needs_geomstats = pytest.mark.skipif(not HAS_GEOMSTATS, reason="geomstats not installed: pip install "
+                                     "'liesuslov[geomstats]'")
+
 ROOT = Path(__file__).resolve().parents[1]
 SETTINGS = settings(max_examples=25, deadline=None)
 FLOATS = st.floats(-2.0, 2.0, allow_nan=False, allow_infinity=False, width=64)
@@ -66,6 +76,7 @@ def test_import_liesuslov_does_not_import_geomstats():
     assert res.stdout.strip() == "ok"
 
 
+@needs_geomstats
 def test_geomstats_import_preserves_user_logging():
     res = _run("""
         import io, logging, os
@@ -93,6 +104,7 @@ def test_geomstats_import_preserves_user_logging():
     assert "INFO" not in res.stderr and "must not appear" not in res.stderr
 
 
+@needs_geomstats
 def test_geomstats_import_without_user_logging_adds_no_handler():
     res = _run("""
         import logging
@@ -119,6 +131,7 @@ def test_non_numpy_backend_is_refused():
     assert "'pytorch'" in res.stdout and "GEOMSTATS_BACKEND=numpy" in res.stdout
 
 
+@needs_geomstats
 def test_in_process_calls_leave_logging_alone():
     root = logging.getLogger()
     level, handlers = root.level, root.handlers[:]
@@ -129,6 +142,7 @@ def test_in_process_calls_leave_logging_alone():
 
 
 # ---------------------------------------------------------------------------- so(n) coordinates
+@needs_geomstats
 @pytest.mark.parametrize("n", range(2, 9))
 def test_basis_change_is_the_explicit_signed_permutation(n):
     T = interop.geomstats_basis(n)
@@ -139,12 +153,14 @@ def test_basis_change_is_the_explicit_signed_permutation(n):
         T[0, 0] = 2.0  # read-only
 
 
+@needs_geomstats
 def test_so3_geomstats_coordinates_are_the_vector_form():
     x = np.array([[1.0, 2.0, 3.0], [-0.5, 0.0, 4.0]])
     np.testing.assert_array_equal(interop.algebra_to_geomstats(x), ls.so(3).to_vector3(x))
     np.testing.assert_array_equal(interop.algebra_to_geomstats([0.7]), [-0.7])
 
 
+@needs_geomstats
 @SETTINGS
 @given(n=st.integers(2, 7), shape=BATCH, data=st.data())
 def test_algebra_round_trip_and_matrices(n, shape, data):
@@ -160,6 +176,7 @@ def test_algebra_round_trip_and_matrices(n, shape, data):
     np.testing.assert_allclose(gsalg.basis_representation(flat).reshape(c.shape), c, atol=1e-15)
 
 
+@needs_geomstats
 @SETTINGS
 @given(n=st.integers(2, 7), data=st.data())
 def test_bracket_against_geomstats(n, data):
@@ -177,6 +194,7 @@ def test_bracket_against_geomstats(n, data):
 
 
 # ---------------------------------------------------------------------------- exp and SO(n)
+@needs_geomstats
 @SETTINGS
 @given(n=st.integers(2, 7), shape=BATCH, seed=st.integers(0, 2**32 - 1))
 def test_group_exp_against_scipy(n, shape, seed):
@@ -192,6 +210,7 @@ def test_group_exp_against_scipy(n, shape, seed):
     np.testing.assert_array_equal(interop.rotation_from_geomstats(theirs), theirs)
 
 
+@needs_geomstats
 @pytest.mark.parametrize("n", [2, 3])
 @pytest.mark.parametrize("shape", [(), (5,), (2, 3)])
 def test_rotation_vectors(n, shape):
@@ -216,12 +235,14 @@ def test_rotation_vectors(n, shape):
         np.testing.assert_allclose(g, want, atol=1e-12)
 
 
+@needs_geomstats
 def test_rotation_vectors_empty_batch():
     assert interop.rotation_vector_from_matrix(np.zeros((0, 3, 3))).shape == (0, 3)
     assert interop.matrix_from_rotation_vector(np.zeros((0, 2, 1))).shape == (0, 2, 2, 2)
 
 
 # ---------------------------------------------------------------------------- spheres
+@needs_geomstats
 @pytest.mark.parametrize("n", range(2, 8))
 def test_sphere_points(n):
     sphere = interop.geomstats_hypersphere(n)
@@ -285,3 +306,34 @@ def test_algebra_and_vector_validation():
         interop.geomstats_hypersphere(1)
     with pytest.raises(TypeError, match="n must be an integer"):
         interop.geomstats_basis(2.5)
+
+
+def test_hypersphere_takes_n_or_geomstats_dim_and_refuses_a_mismatch():
+    with pytest.raises(ValueError, match=r"disagree: dim must be n - 1"):
+        interop.geomstats_hypersphere(3, dim=3)
+    with pytest.raises(TypeError, match="ambient dimension n"):
+        interop.geomstats_hypersphere()
+    with pytest.raises(ValueError, match="dim .* must be an integer >= 1"):
+        interop.geomstats_hypersphere(dim=0)
+
+
+@needs_geomstats
+@pytest.mark.parametrize("n", [2, 3, 5])
+def test_hypersphere_by_dim_is_the_same_sphere(n):
+    for sphere in (interop.geomstats_hypersphere(dim=n - 1), interop.geomstats_hypersphere(n, dim=n - 1)):
+        assert sphere.dim == n - 1
+        assert np.all(sphere.belongs(np.eye(n)))
+
+
+def test_missing_geomstats_names_the_extra():
+    res = _run("""
+        import sys
+        sys.modules['geomstats'] = None  # as if it were not installed
+        from liesuslov import interop
+        try:
+            interop.geomstats_hypersphere(3)
+        except ImportError as exc:
+            print(exc)
+    """)
+    assert res.returncode == 0, res.stderr
+    assert "pip install 'liesuslov[geomstats]'" in res.stdout
