@@ -3,37 +3,14 @@ measurements succeeded, so a failure leaves the output folder and the docs page 
 
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
+from .._io import atomic_write, publish, write_text
 from . import plots, tables
 from .config import RESULT_COLUMNS, BenchConfig, BenchReport
-
-
-def _umask_mode() -> int:
-    """0o666 less the process umask: the mode an ordinary ``open(path, "w")`` would give."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def _atomic(path: Path, write: Callable[[str], None]) -> Path:
-    """Create ``path`` through ``write(tmp)`` on a temporary name in the same folder, then rename it."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.chmod(tmp, _umask_mode())  # mkstemp makes 0o600; the file should look like any other output
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def save_fig(fig, path: Path) -> Path:
@@ -41,19 +18,14 @@ def save_fig(fig, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     try:
-        return _atomic(path, lambda tmp: fig.savefig(tmp, dpi=90))
+        return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=90))
     finally:
         plt.close(fig)
 
 
-def write_text(path: Path, text: str) -> Path:
-    """Write ``text`` to ``path`` atomically (temporary file in the same folder, then rename)."""
-    return _atomic(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8", newline=""))
-
-
 def copy_atomic(src: Path, dst: Path) -> Path:
     """Copy ``src`` to ``dst`` atomically."""
-    return _atomic(dst, lambda tmp: shutil.copyfile(src, tmp))
+    return atomic_write(dst, lambda tmp: shutil.copyfile(src, tmp))
 
 
 def write_outputs(report: BenchReport, config: BenchConfig, out: Path, docs) -> None:
@@ -95,10 +67,7 @@ def write_outputs(report: BenchReport, config: BenchConfig, out: Path, docs) -> 
         if docs is not None:
             page = "\n\n".join([tables.DOCS_INTRO.rstrip()]
                                 + tables.summary_sections(report, config, "img" if draw else None))
-        paths: dict[str, str] = {}
-        for key, name in names.items():
-            os.replace(stage / name, out / name)
-            paths[key] = str(out / name)
+        paths = dict(zip(names, publish(stage, out, names.values()), strict=True))
         if docs is not None:
             docs = Path(docs)
             for key, name in names.items():
