@@ -1,6 +1,6 @@
 r"""The free rigid body (Euler top) in closed form: Jacobi elliptic functions, the period, Montgomery's phase.
 
-Vector form (``MATH.md``): body angular velocity ``w``, principal moments ``J = (J1, J2, J3)`` (distinct,
+Vector form (``docs/concepts.md``): body angular velocity ``w``, principal moments ``J = (J1, J2, J3)`` (distinct,
 positive), body momentum ``M = J w`` and Euler's equations ``M' = M x w`` (our ``dM/dt = [M, Omega]``).
 Sort the moments ``I1 < I2 < I3`` (an odd permutation of the axes is compensated by ``w -> -w``, which
 reverses time in a quadratic field), and let ``2E = sum I_i w_i^2``, ``m^2 = |M|^2``.
