@@ -264,3 +264,18 @@ def test_registry():
         assert case.name == name and "energy" in case.integrals and case.description
         om, G = case.random_state(0, batch=(2,))
         assert all(v.shape == (2,) for v in case.evaluate(om, G).values())
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_cases_pickle_with_their_integrals(name):
+    # ensembles send cases to workers: a case pickles as its recipe and its integrals give the same numbers
+    import pickle
+
+    case = CASES[name].build()
+    again = pickle.loads(pickle.dumps(case))
+    omega, Gamma = case.random_state(3, 4)
+    want, got = case.evaluate(omega, Gamma), again.evaluate(omega, Gamma)
+    assert want.keys() == got.keys()
+    for key in want:
+        np.testing.assert_array_equal(got[key], want[key])
+    assert again.parameters.keys() == case.parameters.keys()

@@ -15,6 +15,8 @@ n-D cases take the diagonal ``I`` of the mass tensor and the Fedorov–Kozlov co
 
 from __future__ import annotations
 
+import inspect
+import pickle
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -61,6 +63,14 @@ class Case:
     integrals: dict = field(repr=False)
     description: str = ""
 
+    def __reduce__(self):
+        # The integrals are closures: a case pickles as its recipe, the registry's constructor and the
+        # validated parameters, and is rebuilt on unpickling (the same numbers).
+        if self.name not in CASES:
+            raise pickle.PicklingError(f"case {self.name!r} is not in ls.CASES: it cannot be rebuilt on unpickling")
+        accepted = inspect.signature(CASES[self.name].constructor).parameters
+        return _rebuild_case, (self.name, {k: v for k, v in self.parameters.items() if k in accepted})
+
     def evaluate(self, omega, Gamma=None) -> dict[str, np.ndarray]:
         """All integrals at ``(omega, Gamma)`` (omega as coordinates or matrices): a dict of arrays (...)."""
         x = self.system.coordinates(omega, "omega")
@@ -93,6 +103,11 @@ class Case:
             return omega, None
         G = rng.standard_normal(shape + (self.system.n,))
         return omega, G / np.linalg.norm(G, axis=-1, keepdims=True)
+
+
+def _rebuild_case(name: str, parameters: dict) -> Case:
+    """Unpickling a :class:`Case`: its constructor with its validated parameters."""
+    return CASES[name].constructor(**parameters)
 
 
 @dataclass(frozen=True)
@@ -491,7 +506,8 @@ def klebsh_tisserand(I, B, *, allow_general: bool = False) -> Case:
         def Fi(x, G, i=i):
             return (B[i] - B[-1]) * G[..., i] ** 2 + (I[i] + I[-1]) * x[..., idx[i]] ** 2
         integrals[f"F_{i + 1}"] = Fi
-    return Case("klebsh_tisserand", system, {"I": I, "B": B}, integrals,
+    params = {"I": I, "B": B} | ({"allow_general": True} if allow_general else {})
+    return Case("klebsh_tisserand", system, params, integrals,
                 f"Klebsh–Tisserand in SO({n}): V = 1/2 sum B_i Gamma_i^2; invariant tori, frequencies "
                 "sqrt((B_i - B_n)/(I_i + I_n)) in d tau = Gamma_n dt")
 
