@@ -298,3 +298,13 @@ def test_se2_errors():
 def test_n_out_written_as_a_whole_float_is_accepted():
     text = _sub('backend = "numpy"', 'backend = "numpy"\nn_out = 1e2')
     assert scene_from_text(text).n_out == 100
+
+
+def test_scenes_pickle():
+    import pickle
+
+    scene = default_scene()
+    again = pickle.loads(pickle.dumps(scene))
+    assert again.name == scene.name and again.case.name == scene.case.name
+    np.testing.assert_array_equal(again.omega0, scene.omega0)
+    assert again.to_toml() == scene.to_toml()
