@@ -125,7 +125,8 @@ class SuslovSystem:
                                  "ls.Subspace.annihilator(algebra, covectors), or constraints=\"none\"")
             constraints = suslov_distribution(alg.n)
         if not isinstance(constraints, Subspace):
-            raise TypeError(f"constraints must be a Subspace (the fibre D), got {type(constraints).__name__}")
+            raise TypeError(f"constraints must be a Subspace (the fibre D), \"none\", \"fedorov_kozlov\" or None, "
+                            f"got {type(constraints).__name__}")
         if constraints.algebra is not alg and (constraints.algebra.dim != alg.dim or not np.allclose(
                 constraints.algebra.structure_constants, alg.structure_constants)):
             raise ValueError(f"constraints live in {constraints.algebra.name}, the inertia in {alg.name}")
