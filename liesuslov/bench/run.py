@@ -8,6 +8,8 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 from . import targets
 from .config import BenchConfig, BenchReport, integrate_kwargs
 from .files import write_outputs
@@ -85,9 +87,17 @@ def run_bench(out_dir, *, quick: bool = False, scenes: Sequence[str] | None = No
     try:
         for key in config.scenes:
             scene = built[key]
-            ref = build_reference(scene, extra_kw)
-            report.references[key] = {"uncertainty": ref.uncertainty, "how": scene.reference, "title": scene.title,
-                                      "t1": scene.t1, "details": ref.details}
+            entry = {"how": scene.reference, "title": scene.title, "t1": scene.t1}
+            try:
+                ref = build_reference(scene, extra_kw)
+            except (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as exc:
+                # Without a reference no error can be measured: the scene is reported as failed, the rest runs.
+                report.references[key] = {**entry, "uncertainty": float("nan"), "details": {},
+                                          "how": f"reference failed ({type(exc).__name__}: {exc})"}
+                for _ in range(len(plans[key]) + 1):
+                    tick(f"{key}: reference failed")
+                continue
+            report.references[key] = {**entry, "uncertainty": ref.uncertainty, "details": ref.details}
             tick(f"{key}: reference")
             for task in plans[key]:
                 report.rows.append(execute_task(task, scene, ref, config.repeats, extra_kw))
