@@ -58,6 +58,7 @@ def _dexpinv(tx, ty, tz, wx, wy, wz, exact):
 
 @njit(cache=True)
 def _free3_field(a, wx, wy, wz):
+    """Euler's equations: w' = (a1 w2 w3, a2 w3 w1, a3 w1 w2)."""
     return a[0] * wy * wz, a[1] * wz * wx, a[2] * wx * wy
 
 

@@ -12,6 +12,7 @@ import numpy as np
 
 
 def _version(dist: str) -> str:
+    """The installed version of a distribution, or "not installed"."""
     from importlib import metadata
 
     try:

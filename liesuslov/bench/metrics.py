@@ -14,11 +14,14 @@ from .scenes import BenchScene
 
 
 def max_abs(a, b) -> float:
+    """Largest absolute componentwise difference of two arrays."""
     return float(np.max(np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float))))
 
 
 @dataclass
 class Reference:
+    """The reference state at t1 of a scene, how far its independent determinations disagree, and how."""
+
     omega: np.ndarray
     Gamma: np.ndarray | None
     g: np.ndarray | None
@@ -61,6 +64,7 @@ def run_metrics(scene: BenchScene, ref: Reference, omega, Gamma, g) -> dict:
 
 
 def nan_row() -> dict:
+    """The metric columns of a failed run: NaN everywhere."""
     nan = float("nan")
     return {k: nan for k in ("err_Omega", "err_Gamma", "err_g", "err_pendulum", "error", "orth_defect",
                              "sphere_defect", "constraint_defect", "drift_energy", "drift_integrals")} | {"drifts": ""}

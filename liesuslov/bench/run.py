@@ -121,6 +121,7 @@ def run_bench(out_dir, *, quick: bool = False, scenes: Sequence[str] | None = No
 
 
 def _bar(total: int, on: bool):
+    """A tqdm progress bar on stderr, or None (off, or tqdm missing)."""
     if not on:
         return None
     try:

@@ -25,6 +25,7 @@ from .timing import ISOLATE_BATCH, ISOLATE_N, guarded, timed
 
 
 def _run_liesuslov(scene: BenchScene, method: str, chart: str, kind: str, value: float, extra_kw: dict):
+    """One liesuslov run of a scene at step ``value`` (kind "h") or rtol ``value``."""
     import liesuslov as ls
 
     kw: dict = {"h": value} if kind == "h" else {"rtol": value, "atol": ATOL_FACTOR * value}
@@ -33,17 +34,20 @@ def _run_liesuslov(scene: BenchScene, method: str, chart: str, kind: str, value:
 
 
 def _run_scipy(scene: BenchScene, method: str, rtol: float):
+    """One scipy ``solve_ivp`` run of a scene's embedded ODE."""
     from scipy.integrate import solve_ivp
 
     return solve_ivp(scene.rhs, (0.0, scene.t1), scene.y0, method=method, rtol=rtol, atol=ATOL_FACTOR * rtol)
 
 
 def trajectory_liesuslov(sol) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(omega (N, d), Gamma or None, g or None) of a liesuslov solution."""
     om = sol.omega.reshape(sol.omega.shape[0], -1)
     return om, sol.Gamma, sol.g
 
 
 def trajectory_scipy(scene: BenchScene, sol) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(omega (N, d), Gamma or None, g or None) of a scipy solution, through the scene's unpacker."""
     return scene.unpack(np.ascontiguousarray(sol.y.T))
 
 
@@ -92,6 +96,8 @@ def build_reference(scene: BenchScene, extra_kw: dict) -> Reference:
 
 @dataclass(frozen=True)
 class _Task:
+    """One work-precision run to make: a route (library, method, chart) at one setting (h or rtol)."""
+
     scene: str
     library: str
     method: str
@@ -117,6 +123,7 @@ def _spread(values: Sequence[float], k: int | None) -> tuple[float, ...]:
 
 
 def plan_tasks(config: BenchConfig, scene: BenchScene) -> list[_Task]:
+    """Every run of a scene's sweep: each liesuslov method × chart, then each scipy method."""
     import liesuslov as ls
 
     tasks = []
@@ -140,6 +147,7 @@ def plan_tasks(config: BenchConfig, scene: BenchScene) -> list[_Task]:
 
 
 def execute_task(task: _Task, scene: BenchScene, ref: Reference, repeats: int, extra_kw: dict) -> dict:
+    """Time one run and measure it against the reference: a row of ``results.csv`` (failures recorded)."""
     row: dict = {"scene": task.scene, "library": task.library, "route": task.route, "method": task.method,
                  "chart": task.chart, "setting_kind": task.kind, "setting": task.value, "t_final": scene.t1,
                  "ref_uncertainty": ref.uncertainty}
@@ -209,6 +217,7 @@ def measure_scaling(n: int, chart: str, repeats: int, extra_kw: dict) -> dict:
 
 
 def throughput_sweep(config: BenchConfig, extra_kw: dict, tick: Callable[[], None]) -> list[dict]:
+    """The batch-throughput rows: each n of ``batch_dims`` × each size of ``batch_sizes``."""
     rows = []
     # Trajectory-steps per measurement: the quick preset runs numpy, which steps each trajectory in Python.
     work = 5e3 if config.preset == "quick" else 1e6
@@ -237,6 +246,7 @@ def scaling_backends(config: BenchConfig) -> tuple[str | None, ...]:
 
 
 def scaling_sweep(config: BenchConfig, extra_kw: dict, tick: Callable[[], None]) -> list[dict]:
+    """The cost-per-step rows: backend × chart × n; after a size fails, the larger ones are skipped."""
     rows = []
     for backend in scaling_backends(config):
         kw = dict(extra_kw) if backend is None else {**extra_kw, "backend": backend}
@@ -259,6 +269,7 @@ def scaling_sweep(config: BenchConfig, extra_kw: dict, tick: Callable[[], None])
 
 
 def long_run(config: BenchConfig, extra_kw: dict, tick: Callable[[], None]) -> list[dict]:
+    """One trajectory of ``long_run_steps`` RKMK4 steps: wall time, structure and energy error."""
     import liesuslov as ls
 
     if not config.long_run_steps:

@@ -125,6 +125,7 @@ def _fk_g_rhs(n: int, xi_dot: Callable) -> Callable:
 
 
 def _klebsh_tisserand() -> BenchScene:
+    """Klebsh–Tisserand in SO(4) with its attitude: Omega, Gamma against the closed form on the torus."""
     import liesuslov as ls
 
     n = 4
@@ -155,6 +156,7 @@ def _klebsh_tisserand() -> BenchScene:
 
 
 def _kharlamova() -> BenchScene:
+    """Kharlamova in SO(5) over one period: the state returns to itself."""
     import liesuslov as ls
 
     n = 5
@@ -191,6 +193,7 @@ def _kharlamova() -> BenchScene:
 
 
 def _lagrange() -> BenchScene:
+    """Lagrange in SO(3), mapped to the spherical pendulum and checked against its elliptic solution."""
     import liesuslov as ls
 
     n = 3
@@ -229,6 +232,7 @@ def _lagrange() -> BenchScene:
 
 
 def _euler_top() -> BenchScene:
+    """The free rigid body with its attitude (no closed form for g: two independent tight runs)."""
     import liesuslov as ls
 
     n = 3
@@ -269,6 +273,7 @@ def _euler_top() -> BenchScene:
 
 
 def _suslov3() -> BenchScene:
+    """Suslov's problem in SO(3), V = 0: the explicit tanh law."""
     import liesuslov as ls
 
     Jw = np.array([[2.0, 0.0, 0.3], [0.0, 3.0, 0.4], [0.3, 0.4, 4.0]])

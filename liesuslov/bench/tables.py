@@ -14,6 +14,7 @@ from .config import GOAL_RATIO, BenchConfig, BenchReport
 
 
 def fmt(x, spec: str = ".3g") -> str:
+    """A cell: numbers in ``spec`` (nan, inf spelled out), bools and strings as they are, None empty."""
     if x is None or x == "":
         return ""
     if isinstance(x, (bool, np.bool_)):
@@ -30,6 +31,7 @@ def fmt(x, spec: str = ".3g") -> str:
 
 
 def csv_text(rows: list[dict], columns: Sequence[str] | None = None) -> str:
+    """CSV of ``rows`` (columns: the given ones, else every key in order of appearance; floats in full)."""
     if columns is None:
         columns = []
         for r in rows:
@@ -53,6 +55,7 @@ def md_table(header: Sequence[str], body: Iterable[Sequence[Any]]) -> str:
 
 
 def ms(t: float) -> str:
+    """Seconds as milliseconds, or a dash when not measured."""
     if not np.isfinite(t):
         return "—"
     return f"{t * 1e3:.3g} ms"

@@ -64,6 +64,7 @@ def _floor_run(n: int, x0: np.ndarray, coeffs: np.ndarray, Gamma0, steps: int):
 
 
 def _agreement(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> float:
+    """Largest absolute difference between two (vector, g) states."""
     return max(float(np.max(np.abs(a[0] - b[0]))), float(np.max(np.abs(a[1] - b[1]))))
 
 
@@ -272,9 +273,11 @@ def summary(target_rows: list[dict], scaling_exponent: dict, scaling: list[dict]
 
 
 def _num(x, spec: str = ".4g") -> str:
+    """A number for the detail column, a dash when missing."""
     return format(float(x), spec) if isinstance(x, (int, float, np.floating)) and np.isfinite(x) else "—"
 
 
 def _status(r: dict) -> str:
+    """What went wrong in a measurement, for the detail column (empty when all is well)."""
     bad = [r[k] for k in ("status", "floor_status") if r.get(k) not in (None, "ok")]
     return f"; {'; '.join(str(b) for b in bad)}{': ' + r['message'] if r.get('message') else ''}" if bad else ""
