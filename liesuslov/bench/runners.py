@@ -21,7 +21,12 @@ from .config import (
 )
 from .metrics import Reference, max_abs, nan_row, run_metrics
 from .scenes import BenchScene, scaling_scene, throughput_case
-from .timing import ISOLATE_BATCH, ISOLATE_N, guarded, timed
+from .timing import ISOLATE_BATCH, ISOLATE_N, affordable_steps, guarded, timed
+
+#: Seconds one call of a throughput measurement may take (fewer steps beyond).
+THROUGHPUT_BUDGET_S = 3.0
+#: Seconds the long run may take: a path slower than that (numpy) is reported as skipped.
+LONG_RUN_BUDGET_S = 120.0
 
 
 def _run_liesuslov(scene: BenchScene, method: str, chart: str, kind: str, value: float, extra_kw: dict):
@@ -182,12 +187,13 @@ def measure_throughput(n: int, batch: int, steps: int, repeats: int, extra_kw: d
     case = throughput_case(n)
     omega, Gamma = case.random_state(np.random.default_rng(batch), batch=(batch,), scale=0.5)
 
-    def run():
+    def run(steps):
         return ls.integrate(case.system, omega, (0.0, steps * h), Gamma0=Gamma, reconstruct=True, method="rkmk4",
                             h=h, t_eval=[steps * h], **extra_kw)
-    sol, wall, count = timed(run, repeats)
+    steps = affordable_steps(run, steps, THROUGHPUT_BUDGET_S)
+    sol, wall, count = timed(lambda: run(steps), repeats)
     ts = batch * steps
-    return {"wall_time": wall, "repeats": count, "backend": sol.stats.get("backend", "numpy"),
+    return {"steps": steps, "wall_time": wall, "repeats": count, "backend": sol.stats.get("backend", "numpy"),
             "traj_steps_per_s": ts / wall, "ns_per_traj_step": wall / ts * 1e9, "us_per_step": wall / steps * 1e6,
             "status": "ok" if sol.success else "failed", "message": "" if sol.success else sol.message}
 
@@ -280,7 +286,18 @@ def long_run(config: BenchConfig, extra_kw: dict, tick: Callable[[], None]) -> l
     case = throughput_case(3)
     omega, Gamma = case.random_state(np.random.default_rng(7), scale=0.5)
     row: dict = {"scene": "Lagrange n = 3", "method": "rkmk4", "chart": "exp", "h": h, "steps": steps, "t_final": t1}
+
+    def run(k):
+        return ls.integrate(case.system, omega, (0.0, k * h), Gamma0=Gamma, reconstruct=True, method="rkmk4", h=h,
+                            t_eval=[k * h], **extra_kw)
     try:
+        probe_steps = 1000
+        affordable = affordable_steps(run, steps, LONG_RUN_BUDGET_S, minimum=probe_steps)
+        if affordable < steps:
+            row.update(status="skipped", message=f"projected over {LONG_RUN_BUDGET_S:.0f} s on this backend "
+                                                 f"({affordable} steps would fit)")
+            tick()
+            return [row]
         start = time.perf_counter()
         sol = ls.integrate(case.system, omega, (0.0, t1), Gamma0=Gamma, reconstruct=True, method="rkmk4", h=h,
                            t_eval=np.linspace(0.0, t1, 101), **extra_kw)

@@ -29,12 +29,14 @@ from collections.abc import Callable
 import numpy as np
 
 from .scenes import FLOOR_H, FLOOR_SCENES, floor_free_body, floor_klebsh_tisserand, hat3
-from .timing import child_env, timed
+from .timing import affordable_steps, child_env, timed
 
 #: The floor and the library must agree to this (largest absolute difference of the state and of g).
 AGREEMENT_TOL = 1e-12
 #: Steps of a floor timing run at least (its per-step cost is ~0.1 µs: shorter runs time the call).
 _FLOOR_MIN_STEPS = 100_000
+#: Seconds one library call of (a) or (b) may take (fewer steps beyond: the numpy path is ~1000x the floor).
+MEASURE_BUDGET_S = 5.0
 #: Output times of target (c) and its interval.
 DENSE_POINTS, DENSE_T1 = 500, 50.0
 #: The goals, as the table states them.
@@ -73,12 +75,12 @@ def measure_single(n: int, steps: int, repeats: int, extra_kw: dict) -> dict:
     import liesuslov as ls
 
     sc = FLOOR_SCENES[n]()
-    t1 = steps * FLOOR_H
 
-    def run():
-        return ls.integrate(sc.system, sc.Omega0, (0.0, t1), Gamma0=sc.Gamma0, reconstruct=True, method="rkmk4",
-                            h=FLOOR_H, t_eval=[t1], **extra_kw)
-    sol, wall, count = timed(run, repeats)
+    def run(k):
+        return ls.integrate(sc.system, sc.Omega0, (0.0, k * FLOOR_H), Gamma0=sc.Gamma0, reconstruct=True,
+                            method="rkmk4", h=FLOOR_H, t_eval=[k * FLOOR_H], **extra_kw)
+    steps = affordable_steps(run, steps, MEASURE_BUDGET_S)
+    sol, wall, count = timed(lambda: run(steps), repeats)
     row = {"target": "a", "n": n, "scene": sc.title, "steps": steps, "lib_us_per_step": wall / steps * 1e6,
            "repeats": count, "backend": sol.stats.get("backend", "numpy"),
            "status": "ok" if sol.success else "failed", "message": "" if sol.success else sol.message}
@@ -105,12 +107,12 @@ def measure_batch(batch: int, steps: int, repeats: int, extra_kw: dict) -> dict:
 
     sc = floor_free_body()
     W0 = _batch_state(batch)
-    t1 = steps * FLOOR_H
 
-    def run():
-        return ls.integrate(sc.system, hat3(W0), (0.0, t1), reconstruct=True, method="rkmk4", h=FLOOR_H,
-                            t_eval=[t1], **extra_kw)
-    sol, wall, count = timed(run, repeats)
+    def run(k):
+        return ls.integrate(sc.system, hat3(W0), (0.0, k * FLOOR_H), reconstruct=True, method="rkmk4", h=FLOOR_H,
+                            t_eval=[k * FLOOR_H], **extra_kw)
+    steps = affordable_steps(run, steps, MEASURE_BUDGET_S)
+    sol, wall, count = timed(lambda: run(steps), repeats)
     ts = batch * steps
     row = {"target": "b", "n": 3, "batch": batch, "steps": steps, "lib_ns_per_traj_step": wall / ts * 1e9,
            "repeats": count, "backend": sol.stats.get("backend", "numpy"),

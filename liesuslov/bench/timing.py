@@ -42,6 +42,20 @@ def timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, float, int]:
     return result, best, count
 
 
+def affordable_steps(run: Callable[[int], Any], wanted: int, budget_s: float, minimum: int = 2) -> int:
+    """At most ``wanted`` steps, fewer if one call ``run(steps)`` would take longer than about ``budget_s``.
+
+    Probes ``run(minimum)`` twice (the first call may compile or fill caches). The probe's call overhead
+    counts as step cost, so the estimate errs towards fewer steps. Keeps a slow path (numpy stepping each
+    trajectory of a large batch in Python) from turning one measurement into minutes.
+    """
+    run(minimum)
+    start = time.perf_counter()
+    run(minimum)
+    per_step = (time.perf_counter() - start) / minimum
+    return int(min(wanted, max(minimum, budget_s / max(per_step, 1e-12))))
+
+
 #: Sizes measured in a child process with memory and time limits (a failure there is recorded, not fatal).
 ISOLATE_N, ISOLATE_BATCH = 64, 10_000
 
