@@ -84,6 +84,8 @@ class BenchConfig:
         Timed repeats after the warm-up (fewer once their total passes ``REPEAT_BUDGET_S``).
     batch_sizes : tuple of int
         Batch throughput (empty: skipped).
+    throughput_work : int
+        Trajectory-steps per throughput measurement (steps = work / batch, 5 to 1000).
     batch_dims : tuple of int
         n of the throughput scenes (3: Lagrange, 4: Klebsh–Tisserand).
     scaling_sizes : tuple of int
@@ -122,6 +124,7 @@ class BenchConfig:
     max_settings: int | None = None
     repeats: int = 5
     batch_sizes: tuple[int, ...] = (1, 10, 100, 1000, 10_000, 100_000)
+    throughput_work: int = 1_000_000
     batch_dims: tuple[int, ...] = (3, 4)
     scaling_sizes: tuple[int, ...] = (3, 4, 8, 16, 32, 64, 128, 256)
     long_run_steps: int = 1_000_000
@@ -152,7 +155,7 @@ class BenchConfig:
         compilation of an optional kernel (20–60 s on a cold cache) would not fit in the minute.
         """
         base = dict(methods=("rkmk4", "rkmk45", "rkmk853"), fixed_factors=dict(QUICK_FIXED),
-                    tolerances=dict(QUICK_TOL), repeats=1, batch_sizes=(1, 10, 100),
+                    tolerances=dict(QUICK_TOL), repeats=1, batch_sizes=(1, 10, 100), throughput_work=5000,
                     scaling_sizes=(3, 4, 8, 16, 32, 64), long_run_steps=0, preset="quick", target_steps=2000,
                     target_batch=100, target_batch_steps=10, cold_compile=False,
                     backend="numpy" if has_backend_option() else None)

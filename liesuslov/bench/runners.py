@@ -225,8 +225,7 @@ def measure_scaling(n: int, chart: str, repeats: int, extra_kw: dict) -> dict:
 def throughput_sweep(config: BenchConfig, extra_kw: dict, tick: Callable[[], None]) -> list[dict]:
     """The batch-throughput rows: each n of ``batch_dims`` × each size of ``batch_sizes``."""
     rows = []
-    # Trajectory-steps per measurement: the quick preset runs numpy, which steps each trajectory in Python.
-    work = 5e3 if config.preset == "quick" else 1e6
+    work = config.throughput_work
     for n in config.batch_dims:
         for batch in config.batch_sizes:
             steps = int(min(1000, max(5, round(work / batch))))
