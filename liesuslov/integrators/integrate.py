@@ -436,8 +436,9 @@ def initial_velocity(system, Omega0, Gamma0=None):
         if Gamma0 is None:
             raise ValueError("Gamma0 is required: the potential (or gyroscopic term) depends on Gamma")
         G0 = unit_vectors(as_float_array(Gamma0, "Gamma0", ndim_min=1, tail=(model.n,)), "Gamma0")
-        x0, G0 = np.broadcast_arrays(x0[..., None, :], G0[..., None, :])
-        x0, G0 = x0[..., 0, :], G0[..., 0, :]
+        lead = np.broadcast_shapes(x0.shape[:-1], G0.shape[:-1])
+        x0 = np.broadcast_to(x0, lead + x0.shape[-1:])
+        G0 = np.broadcast_to(G0, lead + G0.shape[-1:])
     xi = model.xi_from_coords(x0)
     dxi = model.xi_dot(xi, G0)
     domega = model.omega_coords(dxi)

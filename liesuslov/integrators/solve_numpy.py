@@ -55,16 +55,16 @@ def solve(problem: Problem) -> RawResult:
             counts[:, b] = (run.nfev, run.steps, run.rejected)
     if rec_all:
         t_out = np.asarray(steps_t, dtype=float)
-        xi_out = np.asarray(steps_xi, dtype=float).reshape(-1, 1, k)
-        G_out = np.asarray(steps_G, dtype=float).reshape(-1, 1, q)
+        xi_out = np.asarray(steps_xi, dtype=float).reshape(t_out.size, 1, k)
+        G_out = np.asarray(steps_G, dtype=float).reshape(t_out.size, 1, q)
     raw = RawResult(t=t_out, xi=xi_out, G=G_out, status=status, t_stop=t_stop, failure=failure, nfev=counts[0],
                     steps=counts[1], rejected=counts[2], backend="numpy")
     for e in range(P.n_events):
         rows = [(b, t, x, g) for b in range(B) for (t, x, g) in ev[e][b]]
         raw.event_index.append(np.array([r[0] for r in rows], dtype=np.int64))
         raw.event_t.append(np.array([r[1] for r in rows], dtype=float))
-        raw.event_xi.append(np.array([r[2] for r in rows], dtype=float).reshape(-1, k))
-        raw.event_G.append(np.array([r[3] for r in rows], dtype=float).reshape(-1, q))
+        raw.event_xi.append(np.array([r[2] for r in rows], dtype=float).reshape(len(rows), k))
+        raw.event_G.append(np.array([r[3] for r in rows], dtype=float).reshape(len(rows), q))
     return raw
 
 
@@ -219,10 +219,11 @@ class _Trajectory:
                     h_abs = abs(h) * float(control.reject_factor(norm, P.plan.error_exponent))
                     after_reject = True
                     continue
-            elif not ok:
-                return self._fail(4, t)
-            if not (np.all(np.isfinite(xi1)) and (G1 is None or np.all(np.isfinite(G1)))):
+            finite = bool(np.all(np.isfinite(xi1)) and (G1 is None or np.all(np.isfinite(G1))))
+            if not finite:  # also a NaN chart argument: the field, not the chart, broke down
                 return self._fail(1, t + h)
+            if not ok:
+                return self._fail(4, t)
             t_new = t1 if hit else t + h
             # the step is accepted: its interior, if asked for, comes from the continuous extension
             idx = self.out.pending(t, t_new, direction)

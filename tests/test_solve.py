@@ -1,0 +1,305 @@
+"""The per-trajectory time loop: batch = alone, isolated failures, dense output, events, t_eval, robustness.
+
+References are independent of the library: scipy's solve_ivp on the embedded ODE (xi, g) at tight
+tolerance, and the Euler top's closed form in Jacobi elliptic functions (``analytic.EulerTop``, checked
+against scipy in its own tests).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+import liesuslov as ls
+from liesuslov.analytic.euler_top import EulerTop
+from liesuslov.integrators import LinearEvent, coordinate_plane, gamma_crossing, return_plane
+
+BACKENDS = ["numpy", "auto"]
+
+I3 = np.diag([1.0, 2.0, 3.0])
+J3 = np.array([5.0, 4.0, 3.0])  # so(3) body moments of the mass tensor I3: J_i = I_j + I_k
+
+
+def free_body():
+    return ls.SuslovSystem(ls.Inertia.from_mass_tensor(I3), constraints="none")
+
+
+def kt_body():
+    J = ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0, 4.0]))
+    system = ls.SuslovSystem(J, potential=ls.QuadraticPotential([4.0, 3.0, 2.0, 1.0]))
+    Omega0 = np.zeros((4, 4))
+    Omega0[:3, 3] = [0.1, 0.2, 0.3]
+    Omega0[3, :3] = -Omega0[:3, 3]
+    return system, Omega0, np.array([0.0, 0.0, 0.6, 0.8])
+
+
+def embedded_reference(system, omega0, T, t_eval, Gamma0=None):
+    """(omega, g) at t_eval from scipy's DOP853 on the embedded ODE (omega coordinates, vec g), rtol 1e-13."""
+    model = system.model(gamma=True if Gamma0 is not None else None)
+    n = model.n
+    gamma = None if Gamma0 is None else np.asarray(Gamma0, float)
+
+    def rhs(t, y):
+        x = y[:-n * n]
+        g = y[-n * n:].reshape(n, n)
+        xi = model.xi_from_coords(x[None])
+        G = None if gamma is None else (g.T @ gamma)[None]
+        dx = model.omega_coords(model.xi_dot(xi, G))[0]
+        return np.concatenate([dx, (g @ model.omega_matrix(xi)[0]).ravel()])
+
+    y0 = np.concatenate([omega0, np.eye(n).ravel()])
+    r = solve_ivp(rhs, (0.0, T), y0, method="DOP853", rtol=1e-13, atol=1e-15, t_eval=t_eval)
+    return r.y[:-n * n].T, r.y[-n * n:].T.reshape(-1, n, n)
+
+
+# ---------------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("method,kw", [("rkmk45", {"rtol": 1e-8}), ("rkmk853", {"rtol": 1e-9}),
+                                       ("rkmk4", {"h": 0.05})])
+def test_batch_equals_alone_bitwise(backend, method, kw):
+    system, Omega0, Gamma0 = kt_body()
+    scales = np.array([1.0, 3.0, 0.2, 7.0])
+    O = Omega0 * scales[:, None, None]
+    t_eval = np.linspace(0.0, 6.0, 7)
+    batch = ls.integrate(system, O, (0.0, 6.0), Gamma0=Gamma0, reconstruct=True, method=method, t_eval=t_eval,
+                         backend=backend, **kw)
+    assert batch.success
+    steps = batch.stats["trajectory_steps"]
+    if method != "rkmk4":
+        assert len(set(steps.tolist())) > 1  # the trajectories really took their own steps
+    for b in (3, 0, 2):
+        alone = ls.integrate(system, O[b], (0.0, 6.0), Gamma0=Gamma0, reconstruct=True, method=method,
+                             t_eval=t_eval, backend=backend, **kw)
+        assert np.array_equal(alone.g, batch.g[:, b])
+        assert np.array_equal(alone.omega, batch.omega[:, b])
+        assert alone.stats["steps"] == steps[b]
+    chunk = ls.integrate(system, O[1:3], (0.0, 6.0), Gamma0=Gamma0, reconstruct=True, method=method, t_eval=t_eval,
+                         backend=backend, **kw)
+    assert np.array_equal(chunk.g, batch.g[:, 1:3])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_failing_trajectory_is_isolated(backend):
+    """A step beyond the exponential's domain (|h Omega| > pi) fails that trajectory only, with its time."""
+    system = free_body()
+    w = np.array([[0.3, 1.0, 0.4], [300.0, 1000.0, 400.0], [0.1, 0.2, -0.3]])
+    sol = ls.integrate(system, w, (0.0, 2.0), reconstruct=True, method="rkmk4", h=0.01,
+                       t_eval=np.linspace(0, 2, 5), backend=backend)
+    assert sol.status.tolist() == [0, -1, 0]
+    assert not sol.success
+    assert sol.stats["t_stop"][1] == 0.0
+    assert np.all(np.isnan(sol.g[1:, 1])) and np.all(np.isfinite(sol.g[:, [0, 2]]))
+    for b in (0, 2):
+        alone = ls.integrate(system, w[b], (0.0, 2.0), reconstruct=True, method="rkmk4", h=0.01,
+                             t_eval=np.linspace(0, 2, 5), backend=backend)
+        assert np.array_equal(alone.g, sol.g[:, b])
+    assert "t = 0" in sol.message
+
+
+def test_nonfinite_field_at_t0_fails_at_once():
+    pot = ls.Potential(lambda G: np.full(G.shape[:-1], np.nan), lambda G: np.full(G.shape, np.nan))
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(I3), potential=pot)
+    sol = ls.integrate(system, [0.0, 0.0, 0.5], (0.0, 1.0), Gamma0=[0.0, 0.0, 1.0], method="rkmk45")
+    assert sol.status == -1 and sol.stats["t_stop"] == 0.0 and sol.stats["steps"] == 0
+    assert "non-finite" in sol.message
+
+
+def test_batch_without_t_eval_reports_the_two_ends():
+    system, Omega0, Gamma0 = kt_body()
+    sol = ls.integrate(system, np.stack([Omega0, 2 * Omega0]), (0.0, 3.0), Gamma0=Gamma0, method="rkmk45")
+    assert sol.t.tolist() == [0.0, 3.0] and sol.Gamma.shape == (2, 2, 4)
+    one = ls.integrate(system, Omega0, (0.0, 3.0), Gamma0=Gamma0, method="rkmk45")
+    assert one.t.size == one.stats["steps"] + 1  # a single trajectory reports every step
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_t_eval_does_not_change_the_steps(backend):
+    system, Omega0, Gamma0 = kt_body()
+    kw = dict(Gamma0=Gamma0, reconstruct=True, method="rkmk45", rtol=1e-8, backend=backend)
+    end = ls.integrate(system, Omega0, (0.0, 20.0), t_eval=[20.0], **kw)
+    many = ls.integrate(system, Omega0, (0.0, 20.0), t_eval=np.linspace(0.0, 20.0, 501), **kw)
+    assert many.stats["steps"] == end.stats["steps"]
+    assert many.stats["nfev"] <= 1.2 * end.stats["nfev"]  # dopri5's extension is free (FSAL)
+    assert np.array_equal(many.g[-1], end.g[-1])
+    om_ref, g_ref = embedded_reference(system, ls.so(4).vee(Omega0), 20.0, many.t, Gamma0)
+    assert np.max(np.abs(many.g - g_ref)) < 1e-5
+
+
+@pytest.mark.parametrize("method,order", [("rkmk4", 4), ("rkmk5", 5), ("rkmk8", 7)])
+def test_dense_output_order_and_structure(method, order):
+    """Interpolated states between the steps converge like h^min(p, p*+1), on the group to rounding."""
+    system = free_body()
+    w0 = np.array([0.3, 1.0, 0.4])
+    T = 2.0
+    hs = np.array([0.2, 0.1, 0.05]) if order < 7 else np.array([1.0, 0.7, 0.5, 0.35])
+    errs = []
+    for h in hs:
+        t_mid = np.arange(0.5, T / h - 0.49) * h  # the middle of every step
+        sol = ls.integrate(system, w0, (0.0, T), reconstruct=True, method=method, h=h, t_eval=t_mid,
+                           backend="numpy")
+        _, g_ref = embedded_reference(system, w0, T, t_mid)
+        errs.append(np.max(np.abs(sol.g - g_ref)))
+        assert np.max(np.abs(np.swapaxes(sol.g, -1, -2) @ sol.g - np.eye(3))) < 1e-14
+    slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
+    assert slope > order - 0.4, (errs, slope)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_at_gives_exact_structure_and_rejects_outside(backend):
+    system, Omega0, Gamma0 = kt_body()
+    sol = ls.integrate(system, np.stack([Omega0, 1.5 * Omega0]), (0.0, 10.0), Gamma0=Gamma0, reconstruct=True,
+                       method="rkmk853", rtol=1e-10, atol=1e-12, dense_output=True, backend=backend)
+    ts = np.array([7.3, 0.1, 3.3333])
+    s = sol.at(ts)
+    assert s.t.tolist() == ts.tolist() and s.g.shape == (3, 2, 4, 4)
+    assert np.max(np.abs(np.swapaxes(s.g, -1, -2) @ s.g - np.eye(4))) < 1e-13
+    assert np.max(np.abs(np.linalg.norm(s.Gamma, axis=-1) - 1.0)) < 1e-13
+    _, g_ref = embedded_reference(system, ls.so(4).vee(1.5 * Omega0), 10.0, np.sort(ts), Gamma0)
+    assert np.max(np.abs(s.g[[1, 2, 0], 1] - g_ref)) < 1e-8
+    with pytest.raises(ValueError, match="t_span"):
+        sol.at([11.0])
+    plain = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45")
+    with pytest.raises(ValueError, match="dense_output"):
+        plain.at([0.5])
+
+
+# ---------------------------------------------------------------------------------------------------------
+def _euler_zeros(top, component, T):
+    """Zeros of the closed form's omega component in (0, T) by brentq on a fine grid (independent reference)."""
+    ts = np.linspace(0.0, T, 4001)
+    w = top.state(ts)[:, component]
+    out = []
+    for a, b, fa, fb in zip(ts[:-1], ts[1:], w[:-1], w[1:]):
+        if fa * fb < 0:
+            out.append(brentq(lambda t: top.state(t)[component], a, b, xtol=1e-15))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_events_against_the_euler_top_closed_form(backend):
+    system = free_body()
+    w0 = np.array([0.3, 1.0, 0.4])
+    top = EulerTop(J3, w0)
+    assert np.allclose(top.state(0.0), w0)
+    T = 30.0
+    zeros = _euler_zeros(top, 1, T)
+    w0 = ls.hat3(w0)  # the vector w in so(3) (its coordinate 1 is w_2: Omega_02)
+    both = coordinate_plane("omega", 1, dim=3)
+    up = coordinate_plane("omega", 1, dim=3, direction=1)
+    sol = ls.integrate(system, w0, (0.0, T), method="rkmk853", rtol=1e-12, atol=1e-14, events=[both, up],
+                       backend=backend)
+    rec, rec_up = sol.events
+    assert rec.t.size == zeros.size and np.max(np.abs(rec.t - zeros)) < 1e-9
+    assert np.max(np.abs(rec.omega[:, 1])) < 1e-12  # located to near rounding on the extension
+    slopes = np.array([top.state(t + 1e-6)[1] - top.state(t - 1e-6)[1] for t in zeros])
+    assert np.allclose(rec_up.t, zeros[slopes > 0], atol=1e-9)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_terminal_event_stops_each_trajectory(backend):
+    system = free_body()
+    w0 = np.array([[0.3, 1.0, 0.4], [0.5, 0.6, -0.4]])
+    ev = coordinate_plane("omega", 1, dim=3, terminal=True, direction=-1)
+    t_eval = np.linspace(0, 20, 41)
+    sol = ls.integrate(system, ls.hat3(w0), (0.0, 20.0), reconstruct=True, method="rkmk45", rtol=1e-10, atol=1e-12,
+                       events=ev, t_eval=t_eval, backend=backend)
+    assert sol.status.tolist() == [1, 1] and sol.success
+    rec = sol.events[0]
+    assert rec.index.tolist() == [0, 1]
+    for b in range(2):
+        tc = rec.t[b]
+        assert sol.stats["t_stop"][b] == tc
+        assert np.all(np.isnan(sol.omega[t_eval > tc, b])) and np.all(np.isfinite(sol.omega[t_eval <= tc, b]))
+        top = EulerTop(J3, w0[b])
+        assert abs(top.state(tc)[1]) < 1e-8
+
+
+def test_gamma_crossing_and_return_plane_kt():
+    """Klebsh–Tisserand: Gamma_3 = 0 crossings have Gamma_3 = 0 and unit Gamma; the return plane's
+    first crossing after t0 is not t0 and returns the reduced state to its plane."""
+    system, Omega0, Gamma0 = kt_body()
+    sol = ls.integrate(system, Omega0, (0.0, 40.0), Gamma0=Gamma0, method="rkmk853", rtol=1e-11, atol=1e-13,
+                       events=[gamma_crossing(4, 2), return_plane(system, Omega0, Gamma0)])
+    rec, ret = sol.events
+    assert rec.t.size > 0 and np.max(np.abs(rec.Gamma[:, 2])) < 1e-12
+    assert np.max(np.abs(np.linalg.norm(rec.Gamma, axis=-1) - 1.0)) < 1e-13
+    assert ret.t.size > 0 and ret.t[0] > 0.0
+    E0 = system.energy(Omega0, Gamma0)
+    assert np.max(np.abs(system.energy(ret.Omega, ret.Gamma) - E0)) < 1e-9
+
+
+def test_user_callable_event_runs_on_numpy():
+    system = free_body()
+
+    def ev(t, Omega, Gamma, g):
+        return Omega[..., 2, 0] - 0.25  # omega_2 in so(3)'s hat convention = Omega[2, 0]
+
+    sol = ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 10.0), method="rkmk45", rtol=1e-10, atol=1e-12, events=ev)
+    assert sol.stats["backend"] == "numpy"
+    rec = sol.events[0]
+    assert rec.t.size > 0 and np.allclose(rec.Omega[:, 2, 0], 0.25, atol=1e-10)
+
+
+# ---------------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_adaptive_error_tracks_rtol(backend):
+    """Global error at t = 20 within a small factor of rtol on the free body and the KT body in SO(4)."""
+    system = free_body()
+    w0 = np.array([0.3, 1.0, 0.4])
+    _, g_ref = embedded_reference(system, w0, 20.0, [20.0])
+    for rtol in (1e-6, 1e-9):
+        sol = ls.integrate(system, w0, (0.0, 20.0), reconstruct=True, method="rkmk45", rtol=rtol, atol=rtol * 1e-2,
+                           t_eval=[20.0], backend=backend)
+        assert np.max(np.abs(sol.g[-1] - g_ref[-1])) < 20 * rtol
+    kt, Omega0, Gamma0 = kt_body()
+    _, g_ref = embedded_reference(kt, ls.so(4).vee(Omega0), 20.0, [20.0], Gamma0)
+    for rtol in (1e-6, 1e-9):
+        sol = ls.integrate(kt, Omega0, (0.0, 20.0), Gamma0=Gamma0, reconstruct=True, method="rkmk853", rtol=rtol,
+                           atol=rtol * 1e-2, t_eval=[20.0], backend=backend)
+        assert np.max(np.abs(sol.g[-1] - g_ref[-1])) < 20 * rtol
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_structure_without_reprojection(backend):
+    """With re-orthonormalisation off, |g^T g - I| grows at most like C N eps (the chart alone)."""
+    system, Omega0, Gamma0 = kt_body()
+    N = 4000
+    sol = ls.integrate(system, Omega0, (0.0, N * 0.01), Gamma0=Gamma0, reconstruct=True, method="rkmk4", h=0.01,
+                       t_eval=[N * 0.01], reproject=False, backend=backend)
+    defect = np.max(np.abs(sol.g[-1].T @ sol.g[-1] - np.eye(4)))
+    assert defect < 4 * N * np.finfo(float).eps
+    G = ls.integrate(system, Omega0, (0.0, N * 0.01), Gamma0=Gamma0, method="rkmk4", h=0.01, t_eval=[N * 0.01],
+                     reproject=False, backend=backend).Gamma[-1]
+    assert abs(np.linalg.norm(G) - 1.0) < 4 * N * np.finfo(float).eps
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_so3_chart_domain_is_enforced(backend):
+    """h |Omega| = 2 pi: the so(3) dexp^-1 is singular there — a fixed step fails, an adaptive run shrinks."""
+    system = free_body()
+    w0 = np.array([0.0, 0.0, 2 * np.pi])  # a steady rotation about a principal axis
+    sol = ls.integrate(system, w0, (0.0, 2.0), reconstruct=True, method="rkmk4", h=1.0, backend=backend)
+    assert sol.status == -1 and "domain" in sol.message
+    ada = ls.integrate(system, w0, (0.0, 2.0), reconstruct=True, method="rkmk45", first_step=1.0, rtol=1e-10,
+                       atol=1e-12, t_eval=[2.0], backend=backend)
+    assert ada.success and np.allclose(ada.g[-1], np.eye(3), atol=1e-8)
+
+
+def test_multiplier_form_checks_the_constraints():
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(I3))
+    with pytest.raises(ValueError, match="Omega0 is not in the constraint subspace"):
+        ls.integrate(system, [0.4, 0.1, 0.0], (0.0, 1.0), method="rkmk4", h=0.1, form="multiplier")
+
+
+def test_events_bad_input():
+    system = free_body()
+    with pytest.raises(TypeError, match="events"):
+        ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 1.0), method="rkmk45", events=[1.0])
+    ev = coordinate_plane("omega", 1, dim=3)
+    ev.direction = 2
+    with pytest.raises(ValueError, match="direction"):
+        ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 1.0), method="rkmk45", events=ev)
+    with pytest.raises(ValueError, match="Gamma"):
+        ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 1.0), method="rkmk45", events=LinearEvent(Gamma=[0, 0, 1.0]))
