@@ -315,7 +315,7 @@ def test_kernels_agree_with_the_dense_path(scene, chart):
 
 
 def test_default_kernels_and_forcing():
-    from liesuslov.integrators.charts import COMPONENT_MIN_BATCH, COORDS_MAX_N, LOWRANK_MIN_N, make_chart
+    from liesuslov.integrators.charts import COORDS_MAX_N, LOWRANK_MIN_N, make_chart
 
     for n, want in ((3, "so3"), (4, "so4"), (5, "coords"), (COORDS_MAX_N, "coords"), (COORDS_MAX_N + 1, "dense"),
                     (LOWRANK_MIN_N - 1, "dense"), (LOWRANK_MIN_N, "lowrank")):
@@ -323,13 +323,6 @@ def test_default_kernels_and_forcing():
         assert make_chart("exp", n, skew=True, order=4).default_kernel(model) == want
         want_cay = "dense" if want == "coords" else want
         assert make_chart("cayley", n, skew=True, order=4).default_kernel(model) == want_cay
-    model4 = kt_scene(4)[0].model()
-    for chart, n in (("exp", 3), ("cayley", 3), ("exp", 4), ("cayley", 4)):  # small batches: the matrix kernel
-        ch = make_chart(chart, n, skew=True, order=4)
-        small = COMPONENT_MIN_BATCH[(f"so{n}", chart)] - 1
-        model = kt_scene(n)[0].model() if n == 3 else model4
-        assert ch.default_kernel(model, small) == ("dense" if small > 1 else f"so{n}")
-        assert ch.default_kernel(model, small + 1) == f"so{n}"
     multiplier = kt_scene(20)[0].model(form="multiplier")  # full coordinates: not the u ∧ e_n structure
     assert make_chart("exp", 20, skew=True, order=4).default_kernel(multiplier) == "dense"
     assert make_chart("exp", 20, skew=True, order=4).default_kernel(general_scene(20)[0].model()) == "lowrank"

@@ -74,7 +74,7 @@ from ..groups import (
     _stack,
 )
 
-__all__ = ["Chart", "make_chart", "CHARTS", "KERNELS", "LOWRANK_MIN_N", "COORDS_MAX_N", "COMPONENT_MIN_BATCH",
+__all__ = ["Chart", "make_chart", "CHARTS", "KERNELS", "LOWRANK_MIN_N", "COORDS_MAX_N",
            "body_vertical"]
 
 CHARTS = ("exp", "cayley")
@@ -84,8 +84,6 @@ KERNELS = ("so3", "so4", "coords", "lowrank", "dense")
 LOWRANK_MIN_N = 16
 #: The exponential chart on so(n), 5 <= n <= COORDS_MAX_N, runs dexp⁻¹ in coordinates (``"coords"`` kernel).
 COORDS_MAX_N = 8
-#: Smallest batch (B > 1) for which the so(3) / so(4) component kernels beat the matrix ones (measured).
-COMPONENT_MIN_BATCH = {("so3", "exp"): 2, ("so3", "cayley"): 48, ("so4", "exp"): 96, ("so4", "cayley"): 256}
 
 # The dense and component kernels precompute Omega(xi) as one matmul with a (k, m*m) basis when it has at
 # most this many entries; beyond, they call model.omega_matrix at each stage.
@@ -181,15 +179,15 @@ class Chart:
         return cls(self, model, int(batch), int(slots), bool(need_act))
 
     def default_kernel(self, model, batch: int = 1) -> str:
-        """The kernel :meth:`kernel` picks for ``model`` and a batch of ``batch`` trajectories.
+        """The kernel :meth:`kernel` picks for ``model``: the smallest exact one.
 
-        The component kernels cost a fixed ~50–100 numpy calls per stage on a batch; below the batch
-        sizes of :data:`COMPONENT_MIN_BATCH` the matrix kernel's fewer, larger calls are faster (a single
-        trajectory runs the components on Python floats and always takes them).
+        The numpy solver steps one trajectory at a time (batches run compiled), so the choice depends on
+        the scene only: the so(3) / so(4) closed forms, the low-rank Fedorov–Kozlov kernel from
+        :data:`LOWRANK_MIN_N`, coordinates for the exponential on small so(n), matrices otherwise.
+        ``batch`` is accepted for compatibility and ignored.
         """
         if self.skew and self.m in (3, 4):
-            kind = f"so{self.m}"
-            return kind if batch == 1 or batch >= COMPONENT_MIN_BATCH[(kind, self.name)] else "dense"
+            return f"so{self.m}"
         if self.skew and self.m >= LOWRANK_MIN_N and getattr(model, "fedorov_kozlov", False):
             return "lowrank"
         if self.skew and self.name == "exp" and self.m <= COORDS_MAX_N and _on_so(model, self.m):

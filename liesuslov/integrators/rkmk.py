@@ -129,8 +129,8 @@ class RKMKStepper:
         exponential's dexp⁻¹ has its first pole at angle 2 pi and the closed forms lose accuracy past pi)."""
         if self.chart.name != "exp":
             return True
-        e = self.kern.error(flat)
-        return bool(np.sum(e * e) < 2.0 * math.pi ** 2)  # NaN: False
+        e = self.kern.error(flat).ravel()
+        return bool(e @ e < 2.0 * math.pi ** 2)  # NaN: False
 
     def _combine(self, w: np.ndarray, h: float, base: float = 1.0) -> np.ndarray:
         """``base * row0 + h sum_j w_j row_{1+j}``: (S,) weights -> one row (xi part and chart part)."""

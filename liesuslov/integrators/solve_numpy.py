@@ -19,7 +19,6 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
-from .. import groups
 from . import control
 from .problem import RENORM_EVERY, STATUS_FAILED, STATUS_TERMINAL, Problem, RawResult
 from .rkmk import RKMKStepper
@@ -125,7 +124,7 @@ class _Events:
                 z = np.concatenate([np.reshape(xi, -1), np.reshape(G, -1) if G is not None else np.zeros(0)])
                 vals[e] = float(coef[self.b] @ z - off[self.b])
             else:
-                vals[e] = float(np.reshape(fn(t, *_user_state(P, self.b, xi, G)), -1)[0])
+                vals[e] = float(np.reshape(fn(t, *P.user_state(self.b, xi, G)), -1)[0])
         return vals
 
     def crossings(self, old: np.ndarray, new: np.ndarray, at_start: bool) -> list[int]:
@@ -143,31 +142,13 @@ class _Events:
         return out
 
 
-def _user_state(P: Problem, b: int, xi, G):
-    """(Omega, Gamma, g) of one trajectory as an event callable sees them, batch axis of length 1."""
-    model = P.model
-    x = np.reshape(xi, (1, -1))
-    Omega = model.omega_matrix(x) if P.skew else model.omega_coords(x)
-    Gamma = g = None
-    if P.mode == "g":
-        g = np.reshape(G, (1, P.m, P.m))
-        if model.has_gamma:
-            Gamma = np.matmul(P.gamma[b][None, None, :], g)[:, 0, :]
-    elif P.mode == "gamma":
-        Gamma = np.reshape(G, (1, -1))
-    return Omega, Gamma, g
-
-
 class _Trajectory:
     """One trajectory's time loop: controller, failure rules, output, events, re-projection."""
 
     def __init__(self, P: Problem, b: int, stepper: RKMKStepper, out: _Output, events: _Events) -> None:
         self.P, self.b, self.st, self.out, self.ev = P, b, stepper, out, events
         self.nfev = self.steps = self.rejected = 0
-        self.xi = P.xi0[b][None, :].copy()
-        self.G = None if P.q == 0 else (P.G0[b].reshape(1, P.m, P.m).copy() if P.mode == "g"
-                                         else P.G0[b][None, :].copy())
-        self.gamma = P.gamma[b][None, :] if P.gamma.shape[-1] else None
+        self.xi, self.G, self.gamma = P.initial_state(b)
         self.renorm = max(RENORM_EVERY, P.m)
 
     def _flatG(self, G):
@@ -250,8 +231,7 @@ class _Trajectory:
             if stop_t is not None:
                 return STATUS_TERMINAL, 0, stop_t
             if P.reproject and G1 is not None and self.steps % self.renorm == 0:
-                G1 = groups.orthonormalize(G1) if P.mode == "g" and P.skew else (
-                    G1 / np.linalg.norm(G1, axis=-1, keepdims=True) if P.mode == "gamma" else G1)
+                G1 = P.reprojected(G1)
                 st.reset()
             self.xi, self.G, t = xi1, G1, t_new
             if self.out.rec_all:
@@ -263,21 +243,12 @@ class _Trajectory:
                 after_reject = False
         return 0, 0, t1
 
-    def _group_velocity(self, xi, G):
-        """d/dt of the group part at (xi, G): ``g Omega`` (attitude) or ``-Omega Gamma`` (vertical), flat."""
-        if G is None:
-            return np.zeros(0)
-        Om = self.P.model.omega_matrix(xi)
-        if self.P.mode == "g":
-            return np.matmul(G, Om).reshape(-1)
-        return -np.matmul(Om, G[..., None]).reshape(-1)
-
     def _initial_step(self) -> float:
         """Hairer's starting step on the embedded state y = (xi, G), as scipy's (one more evaluation)."""
         P, st = self.P, self.st
         G = self.G
         y0 = np.concatenate([self.xi.reshape(-1), np.zeros(0) if G is None else G.reshape(-1)])
-        f0 = np.concatenate([st.field(self.xi, G, self.gamma).reshape(-1), self._group_velocity(self.xi, G)])
+        f0 = np.concatenate([st.field(self.xi, G, self.gamma).reshape(-1), P.group_velocity(self.xi, G)])
         sc = control.scale(y0, y0, P.rtol, P.atol)
         d0 = math.sqrt(np.mean((y0 / sc) ** 2))
         d1 = math.sqrt(np.mean((f0 / sc) ** 2))
@@ -287,7 +258,7 @@ class _Trajectory:
         G1 = None if G is None else y1[P.k:].reshape(G.shape)
         L1 = P.model.xi_dot(xi1, st.vertical(G1, self.gamma))
         st.nfev += 1
-        f1 = np.concatenate([np.reshape(L1, -1), self._group_velocity(xi1, G1)])
+        f1 = np.concatenate([np.reshape(L1, -1), P.group_velocity(xi1, G1)])
         d2 = math.sqrt(np.mean(((f1 - f0) / sc) ** 2)) / h0
         return float(control.initial_step(d0, d1, d2, h0, P.plan.order))
 
