@@ -5,7 +5,6 @@ Layers (lower never import higher): :mod:`.algebra` → :mod:`.groups` → :mod:
 The conventions are in ``docs/concepts.md``; the public names in ``docs/api.md``.
 """
 
-from . import analytic, interop
 from .algebra import (
                       Inertia,
                       LieAlgebra,
@@ -56,9 +55,11 @@ from .scene import Scene, load_scene
 
 __version__ = "0.1.0"
 
-# Research tools and ensembles load on first use (``import liesuslov`` stays light).
-_LAZY = {"poincare_section": ".research", "reconstruction_phase": ".research", "lyapunov_exponent": ".research",
-         "ReconstructionPhase": ".research", "ensemble": ".ensemble", "open_ensemble": ".ensemble",
+# The closed forms (scipy.special), geomstats interop, research tools and ensembles load on first use:
+# ``import liesuslov`` stays light. A value None means the name is a submodule.
+_LAZY = {"analytic": None, "interop": None, "poincare_section": ".research", "reconstruction_phase": ".research",
+         "lyapunov_exponent": ".research", "ReconstructionPhase": ".research", "ensemble": ".ensemble",
+         "open_ensemble": ".ensemble",
          "Ensemble": ".ensemble", "EventRecord": ".integrators"}
 
 
@@ -66,6 +67,8 @@ def __getattr__(name: str):
     if name in _LAZY:
         import importlib
 
+        if _LAZY[name] is None:  # a submodule
+            return importlib.import_module(f".{name}", __name__)
         return getattr(importlib.import_module(_LAZY[name], __name__), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 

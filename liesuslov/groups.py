@@ -45,7 +45,6 @@ from functools import cache, lru_cache
 from math import comb, factorial
 
 import numpy as np
-from scipy.linalg.lapack import dgesv as _dgesv
 
 __all__ = [
     "expm_skew", "expm", "expm_skew_apply", "expm_so3", "expm_so3_apply",
@@ -90,7 +89,9 @@ def _solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """
     n, k = B.shape[-2:]
     if A.size == n * n and B.size == n * k and A.dtype == np.float64 and B.dtype == np.float64:
-        x, info = _dgesv(A.reshape(n, n), B.reshape(n, k))[2:]  # one system, whatever its unit axes
+        from scipy.linalg.lapack import dgesv  # scipy.linalg loads on first use, not on import
+
+        x, info = dgesv(A.reshape(n, n), B.reshape(n, k))[2:]  # one system, whatever its unit axes
         if info:
             raise np.linalg.LinAlgError("Singular matrix")
         if A.ndim == 2 and B.ndim == 2:

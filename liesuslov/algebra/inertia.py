@@ -16,7 +16,6 @@ from __future__ import annotations
 from functools import cached_property
 
 import numpy as np
-import scipy.sparse
 
 from .._validation import as_float_array, check_symmetric
 from .lie import LieAlgebra
@@ -314,6 +313,8 @@ class Inertia:
         nnz = int(np.count_nonzero(B))
         if nnz > _SPARSE_ROW_NNZ * B.shape[0]:
             return None
+        import scipy.sparse  # loaded on first use
+
         return scipy.sparse.csr_matrix(B)
 
     def _same_algebra(self, D: Subspace) -> None:

@@ -9,7 +9,6 @@ so(n) is -1/2 tr(AB)).
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from .._validation import as_float_array, check_symmetric
 from .lie import LieAlgebra
@@ -83,7 +82,7 @@ class Subspace:
             if rank < A.shape[0]:
                 raise ValueError(f"covectors are linearly dependent: rank {rank} < {A.shape[0]} constraints; "
                                  "remove the redundant rows (each constraint must be independent)")
-        null = scipy.linalg.null_space(A) if A.shape[0] else np.eye(d)
+        null = _scipy_linalg().null_space(A) if A.shape[0] else np.eye(d)
         return cls(algebra, _canonical_basis(null.T, d), tol=tol)
 
     # ------------------------------------------------------------------ data
@@ -119,7 +118,7 @@ class Subspace:
             rest = np.ones(d, dtype=bool)
             rest[np.argmax(nz, axis=1)] = False
             return Subspace(self.algebra, np.eye(d)[rest], tol=self.tol)
-        null = scipy.linalg.null_space(B) if self.dim < d else np.zeros((d, 0))
+        null = _scipy_linalg().null_space(B) if self.dim < d else np.zeros((d, 0))
         return Subspace(self.algebra, _canonical_basis(null.T, d), tol=self.tol)
 
     def coordinates(self, x) -> np.ndarray:
@@ -266,9 +265,16 @@ def _canonical_basis(V: np.ndarray, d: int) -> np.ndarray:
     if k == 0:
         return np.zeros((0, d))
     P = V.T @ V
-    _, _, piv = scipy.linalg.qr(P, pivoting=True, mode="economic")
+    _, _, piv = _scipy_linalg().qr(P, pivoting=True, mode="economic")
     cols = np.sort(piv[:k])
     Q, R = np.linalg.qr(P[:, cols])
     Q = Q * np.sign(np.where(np.diag(R) == 0, 1.0, np.diag(R)))
     Q[np.abs(Q) < 1e-15] = 0.0
     return np.ascontiguousarray(Q.T)
+
+
+def _scipy_linalg():
+    """scipy.linalg, imported on first use (``import liesuslov`` does not load it)."""
+    import scipy.linalg
+
+    return scipy.linalg

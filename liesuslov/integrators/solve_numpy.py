@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import brentq
 
 from . import control
 from .problem import RENORM_EVERY, STATUS_FAILED, STATUS_TERMINAL, Problem, RawResult
@@ -264,6 +263,8 @@ class _Trajectory:
 
     def _locate(self, crossed, t, h, t_new, ev_old, ev_new) -> float | None:
         """Locate each crossing on the extension, record them in time order; the first terminal time or None."""
+        from scipy.optimize import brentq  # loaded when an event is first located
+
         P, st = self.P, self.st
         found = []
         for e in crossed:

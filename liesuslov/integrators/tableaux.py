@@ -567,17 +567,15 @@ def _dop853_dense() -> tuple[np.ndarray, np.ndarray]:
         for j, v in drow.items():
             d[j] = v
         F.append(d)
-    x = np.polynomial.Polynomial([0.0, 1.0])
-    one_minus_x = 1.0 - x
-    poly = [np.polynomial.Polynomial([0.0]) for _ in range(S)]
-    for i, f in enumerate(reversed(F)):  # evaluated stage by stage: the weights are polynomials in x
-        fac = x if i % 2 == 0 else one_minus_x
-        poly = [(p + f[j]) * fac for j, p in enumerate(poly)]
-    dense = np.zeros((S, 7))
-    for j, p in enumerate(poly):
-        coef = np.zeros(8)
-        coef[: len(p.coef)] = p.coef
-        dense[j] = coef[1:8]  # no constant term: b_j(0) = 0
+    # polynomials in x as coefficient rows (S, 8), lowest power first: times x is a shift, times (1 - x) a
+    # difference of shifts
+    poly = np.zeros((S, 8))
+    for i, f in enumerate(reversed(F)):
+        poly[:, 0] += f
+        shifted = np.zeros_like(poly)
+        shifted[:, 1:] = poly[:, :-1]
+        poly = shifted if i % 2 == 0 else poly - shifted
+    dense = np.ascontiguousarray(poly[:, 1:8])  # no constant term: b_j(0) = 0
     return rows, dense
 
 
