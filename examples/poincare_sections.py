@@ -52,7 +52,7 @@ def main(out_dir=None, quick: bool = False) -> Path:
             F = case.integrals["F"]
             dF = np.max(np.abs(F(rec.omega, rec.Gamma) - F(omega, Gamma)[rec.index]))
             line += f", |F - F(0)| <= {dF:.2e}"
-        lam = ls.lyapunov_exponent(system, omega[:4], (0.0, T / 2), Gamma0=Gamma[:4], seed=0, renormalize_every=2.0)
+        lam = ls.lyapunov_exponent(system, omega[:4], (0.0, T / 2), Gamma0=Gamma[:4], seed=0)
         print(line)
         print(f"    largest Lyapunov exponents of 4 of them over t = {T / 2:g}: {np.array2string(lam, precision=3)}"
               f" (log t / t = {np.log(T / 2) / (T / 2):.2e})")

@@ -200,3 +200,49 @@ def test_ensemble_command_bad_arguments_exit_2(tmp_path, capsys):
     assert cli.main(["ensemble", str(SCENES / "suslov3.toml"), "--n", "0", "--out", str(tmp_path)]) == 2
     assert "--n must be >= 1" in capsys.readouterr().err
     assert cli.main(["ensemble", str(SCENES / "suslov3.toml"), "--workers", "-1", "--out", str(tmp_path)]) == 2
+
+
+# ---------------------------------------------------------------------------- section, phase (research tools)
+FREE_BODY = """description = "free rigid body"
+constraints = "none"
+[body]
+principal_moments = [1.0, 2.0, 3.0]
+[initial]
+w = [0.3, 0.2, 1.0]
+[integrate]
+t_span = [0.0, 10.0]
+method = "rkmk853"
+"""
+
+
+def test_phase_command_free_body_matches_the_elliptic_period(tmp_path, capsys):
+    from liesuslov.analytic.euler_top import EulerTop
+
+    scene = tmp_path / "free.toml"
+    scene.write_text(FREE_BODY)
+    assert cli.main(["phase", str(scene), "--out", str(tmp_path / "ph"), "--no-figures"]) == 0
+    text = (tmp_path / "ph" / "phase.txt").read_text()
+    assert text in capsys.readouterr().out
+    T = float(text.split("period T = ")[1].split()[0])
+    assert abs(T - float(EulerTop([1.0, 2.0, 3.0], [0.3, 0.2, 1.0]).period)) < 1e-8
+    assert "axis (momentum)" in text and "free body (Montgomery)" in text
+
+
+def test_phase_command_no_return_exits_1(tmp_path):
+    out = tmp_path / "ph"
+    assert cli.main(["phase", str(SCENES / "suslov3.toml"), "--t-max", "20", "--out", str(out), "--no-figures"]) == 1
+    assert "t_max = 20" in (out / "phase.txt").read_text()
+
+
+def test_section_command_writes_crossings_and_integral_drift(tmp_path, capsys):
+    out = tmp_path / "sec"
+    assert cli.main(["section", str(SCENES / "lagrange3.toml"), "--n", "3", "--t-end", "20", "--out", str(out),
+                     "--no-figures"]) == 0
+    data = np.load(out / "section.npz")
+    assert data["t"].size > 0 and np.max(np.abs(data["Gamma"][:, -1])) < 1e-10
+    assert set(np.unique(data["index"])) <= {0, 1, 2}
+    text = (out / "section.txt").read_text()
+    drifts = [float(line.rsplit(":", 1)[1]) for line in text.splitlines() if line.startswith("max |")]
+    assert drifts and max(drifts) < 1e-7
+    assert cli.main(["section", str(SCENES / "lagrange3.toml"), "--index", "7", "--out", str(out)]) == 2
+    assert "--index" in capsys.readouterr().err
