@@ -53,6 +53,11 @@ class ModelProtocol(Protocol):
     -----
     Every method is batched over leading axes ``(...)``, takes float arrays and does no validation (it
     is the hot path). ``Gamma`` is None when ``has_gamma`` is False.
+
+    A model is the same for every trajectory: the integrator may call it on one trajectory at a time
+    (``xi`` of shape (1, k)) or on any sub-batch, so it must not carry per-trajectory parameters (a
+    field that differs between trajectories belongs in the state, or in a frame change done outside,
+    as :func:`~liesuslov.reduction.integrate_pendulum` does for a batch of field directions).
     """
 
     k: int

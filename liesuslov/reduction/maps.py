@@ -148,7 +148,7 @@ def momentum_map(Omega, inertia, *, as_matrix: bool = False) -> np.ndarray:
     return block if as_matrix else so(n - 1).vee(block)
 
 
-def _axis_rotation(q: np.ndarray) -> np.ndarray:
+def axis_rotation(q: np.ndarray) -> np.ndarray:
     """A deterministic ``g_q ∈ SO(n)`` with ``g_q e_n = q`` for unit ``q`` (..., n).
 
     ``q_n >= 0``: the rotation in the plane span{e_n, q} taking e_n to q and fixing its orthogonal
@@ -213,7 +213,7 @@ def lift(q, v, fibre=None) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"the batch axes of q, v and fibre do not broadcast: {shapes}") from exc
     qa = np.broadcast_to(qa, shape + (n,))
     va = tangent(qa, np.broadcast_to(va, shape + (n,)), "q", "v")
-    g = _axis_rotation(qa)
+    g = axis_rotation(qa)
     if Rf is not None:
         g = g.copy()
         g[..., :, : n - 1] = g[..., :, : n - 1] @ Rf

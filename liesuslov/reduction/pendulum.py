@@ -5,14 +5,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from .._validation import as_float_array, check_positive, check_real
-from ..algebra import Subspace, so
+from ..algebra import Subspace, body_vector, so, space_vector
 from ..integrators import integrate
 from ._checks import dim_n, tangent, unit
-from .maps import pendulum_energy, pendulum_momentum
+from .maps import axis_rotation, pendulum_energy, pendulum_momentum
 
 __all__ = ["SphericalPendulum", "PendulumModel", "PendulumSolution", "integrate_pendulum"]
 
@@ -105,18 +106,17 @@ class SphericalPendulum:
 
     # ------------------------------------------------------------------ integration
     def model(self, batch_shape: tuple[int, ...] = ()) -> PendulumModel:
-        """The model object that :func:`liesuslov.integrate` runs, for a batch of ``batch_shape``.
+        """The model that :func:`liesuslov.integrate` runs (an implementation of ``ModelProtocol``).
 
-        A batched ``gamma`` is broadcast to ``batch_shape`` and flattened in the integrator's order.
+        A model has one field direction for every trajectory (the integrator advances each trajectory
+        on its own, so a model cannot carry per-trajectory parameters): with a batched ``gamma`` this
+        is a ValueError, and :func:`integrate_pendulum` instead integrates each trajectory in a frame
+        where its field is ``e_n``. ``batch_shape`` is accepted for compatibility and not used.
         """
-        gam = self.gamma
-        if gam.ndim > 1:
-            try:
-                gam = np.broadcast_to(gam, tuple(batch_shape) + (self.n,)).reshape(-1, self.n)
-            except ValueError as exc:
-                raise ValueError(f"gamma's batch axes {self.gamma.shape[:-1]} do not broadcast to "
-                                 f"{tuple(batch_shape)}") from exc
-        return PendulumModel(self.n, self.B / self.m, gam, system=self)
+        if self.gamma.ndim > 1:
+            raise ValueError(f"gamma has batch axes {self.gamma.shape[:-1]}: a model has one field direction; "
+                             "use integrate_pendulum (it rotates each trajectory so that its field is e_n)")
+        return PendulumModel(self.n, self.B / self.m, self.gamma, system=self)
 
     def integrate(self, q0, v0, t_span, **integrate_kwargs) -> PendulumSolution:
         """Shorthand for :func:`integrate_pendulum` ``(self, q0, v0, t_span, **integrate_kwargs)``."""
@@ -224,8 +224,9 @@ class PendulumSolution:
         The pendulum's mass (for :attr:`p` ``= m v``).
     stats : dict
         The integrator's statistics.
-    status : int
-        0 success, −1 failure (``message`` says why; the arrays hold what was computed).
+    status : int or ndarray of int, shape (...)
+        Per trajectory as the integrator reports it: 0 success, −1 failure (``message`` says why; the
+        arrays hold what was computed).
     message : str
     """
 
@@ -236,12 +237,13 @@ class PendulumSolution:
     W: np.ndarray
     m: float = 1.0
     stats: dict = field(default_factory=dict)
-    status: int = 0
+    status: Any = 0
     message: str = ""
 
     @property
     def success(self) -> bool:
-        return self.status == 0
+        """True iff every trajectory reached the end of ``t_span`` (``status >= 0`` everywhere)."""
+        return bool(np.all(np.asarray(self.status) >= 0))
 
     @property
     def p(self) -> np.ndarray:
@@ -301,14 +303,25 @@ def integrate_pendulum(pendulum: SphericalPendulum, q0, v0, t_span, **integrate_
                          f"{pendulum.gamma.shape[:-1]} do not broadcast") from exc
     q = np.broadcast_to(q, shape + (n,))
     v = tangent(q, np.broadcast_to(v, shape + (n,)), "q0", "v0")
+    R = None
+    if pendulum.gamma.ndim > 1:
+        # One field per trajectory: the equations are rotation-equivariant, so trajectory b runs in the
+        # frame R_b with R_b gamma_b = e_n, all of them through one model with the field e_n.
+        R = np.swapaxes(axis_rotation(np.broadcast_to(pendulum.gamma, shape + (n,))), -1, -2)
+        q, v = space_vector(R, q), space_vector(R, v)
+        model = PendulumModel(n, pendulum.B / pendulum.m, np.eye(n)[-1], system=pendulum)
+    else:
+        model = pendulum.model()
     P = v[..., :, None] * q[..., None, :]
     Omega0 = np.swapaxes(P, -1, -2) - P  # Omega = -W = q ∧ v, exactly skew
     kwargs = {"method": "rkmk45", **integrate_kwargs}
-    model = pendulum.model(shape)
     sol = integrate(model, Omega0, t_span, Gamma0=q, **kwargs)
     Q = sol.Gamma
-    Wc = sol.xi
-    Wm = pendulum.algebra.hat(Wc)
+    Wm = -sol.Omega  # W = -Omega
+    if R is not None:  # back to the space frame: q = R^T q', W = R^T W' R
+        Q = body_vector(R, Q)
+        Wm = np.swapaxes(R, -1, -2) @ Wm @ R
+    Wc = pendulum.algebra.vee(Wm)
     V = np.einsum("...ij,...j->...i", Wm, Q)
     return PendulumSolution(t=sol.t, q=Q, v=V, energy=pendulum.energy(Q, V), W=Wc, m=pendulum.m,
                             stats=dict(sol.stats), status=sol.status, message=sol.message)
