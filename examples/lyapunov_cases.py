@@ -58,7 +58,7 @@ def initial_states(system, rng, B: int):
 
 
 def main(out_dir=None, quick: bool = False) -> Path:
-    T = 30.0 if quick else 200.0
+    T = 15.0 if quick else 200.0
     rng = np.random.default_rng(7)
     fig = Figure(figsize=(11, 6), layout="constrained")
     ax = fig.add_subplot()
