@@ -329,6 +329,26 @@ def test_bad_arguments():
         ls.lyapunov_exponent(ls.SuslovSystem(ls.Inertia.from_principal_moments(J)), x0, (0.0, 1.0))
     with pytest.raises(TypeError, match="system"):
         ls.reconstruction_phase("body", x0)
+    kh = C.kharlamova3(J, 1.0, 0.5).system
+    with pytest.raises(ValueError, match="Gamma0 is required"):
+        ls.reconstruction_phase(kh, np.array([0.3, 0.5]) @ kh.constraints.basis)
+    with pytest.raises(ValueError, match="Gamma0 must be a unit vector"):
+        ls.poincare_section(kh, np.array([0.3, 0.5]) @ kh.constraints.basis, (0.0, 1.0), gamma_crossing(3),
+                            Gamma0=[0.0, 0.0, 2.0])
+    with pytest.raises(ValueError, match="t_eval"):
+        ls.poincare_section(sysm, x0, (0.0, 1.0), plane(omega=[1.0, 0.0, 0.0]), t_eval=[0.5])
+
+
+def test_fixed_step_method_with_h_is_accepted():
+    """A fixed-step method is fine when h is given (the defaults apply only without options)."""
+    J = np.array([1.0, 2.0, 3.0])
+    top = EulerTop(J, [0.3, 0.2, 1.0])
+    ph = ls.reconstruction_phase(free_body(J), coords3([0.3, 0.2, 1.0]), period=top.period, method="rkmk4",
+                                 h=top.period / 400)
+    M0 = J * np.array([0.3, 0.2, 1.0])
+    assert np.max(np.abs(ph.monodromy @ M0 - M0)) < 1e-6
+    expected = top.dynamic_phase() - top.geometric_phase()
+    assert abs(np.angle(np.exp(1j * (ph.angle - expected)))) < 1e-6
 
 
 # ------------------------------------------------------------------------------------------ linear algebra

@@ -85,7 +85,7 @@ class Batch:
         return xi if Gamma is None else np.concatenate([xi, Gamma], axis=-1)
 
 
-def prepare(system, Omega0, Gamma0=None, g0=None, *, need_gamma: bool = False) -> Batch:
+def prepare(system, Omega0, Gamma0=None, g0=None) -> Batch:
     """Check ``system``, ``Omega0`` (in D), ``Gamma0`` (unit) and ``g0`` (SO(n)); broadcast and flatten."""
     from ..mechanics import SuslovSystem
 
@@ -100,10 +100,9 @@ def prepare(system, Omega0, Gamma0=None, g0=None, *, need_gamma: bool = False) -
                          "e.g. system.constraints.project(omega)")
     shapes = [x.shape[:-1]]
     G = None
-    if Gamma0 is None and (system.needs_gamma or need_gamma) and system.is_so:
-        if system.needs_gamma:
-            raise ValueError(f"Gamma0 is required: the potential (or gyroscopic term) depends on Gamma; pass a unit "
-                             f"vector of shape (..., {system.n})")
+    if Gamma0 is None and system.needs_gamma:
+        raise ValueError(f"Gamma0 is required: the potential (or gyroscopic term) depends on Gamma; pass a unit "
+                         f"vector of shape (..., {system.n})")
     if Gamma0 is not None:
         if not system.is_so:
             raise ValueError(f"Gamma0 must be None on {system.algebra.name}: Gamma exists only for a body in SO(n)")
