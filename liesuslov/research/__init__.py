@@ -9,11 +9,11 @@ Every tool takes a batch of initial data like :func:`liesuslov.integrate` and it
 options they use ``method="rkmk853", rtol=1e-10, atol=1e-12``.
 """
 
-from ._runner import DEFAULT_OPTIONS, SectionRecord
+from ._runner import DEFAULT_OPTIONS
 from .lyapunov import LyapunovResult, lyapunov_exponent
 from .phase import ReconstructionPhase, axis_angle, reconstruction_phase, rotation_angles, solid_angle
 from .sections import coordinate_plane, gamma_crossing, plane, poincare_section, return_plane
 
 __all__ = ["poincare_section", "reconstruction_phase", "ReconstructionPhase", "lyapunov_exponent",
            "LyapunovResult", "plane", "coordinate_plane", "gamma_crossing", "return_plane",
-           "rotation_angles", "axis_angle", "solid_angle", "SectionRecord", "DEFAULT_OPTIONS"]
+           "rotation_angles", "axis_angle", "solid_angle", "DEFAULT_OPTIONS"]

@@ -1,15 +1,13 @@
 """Shared plumbing of the research tools: inputs, default options, crossings of a section.
 
-The crossings come from ``integrate(..., events=...)`` (roots located per trajectory on the method's
-continuous extension). While the integrator of this tree has no ``events`` argument, a fallback samples
-the solution on a fine grid (``t_eval``) and locates each root on the local degree-7 interpolant of the
-samples (error ~ ``(h/T)^8``, about ``1e-12`` relative at the grid used); its results carry the same
-fields as an :class:`EventRecord`. The fallback is selected automatically and never by the user.
+The crossings come from ``integrate(..., events=[event])``: roots located per trajectory on the method's
+continuous extension, returned as an :class:`~liesuslov.integrators.events.EventRecord`. Linear sections
+(:class:`~liesuslov.integrators.events.LinearEvent`, possibly one plane per trajectory) are evaluated
+natively by the integrator.
 """
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,25 +15,10 @@ import numpy as np
 
 from .._validation import as_float_array, check_positive
 from ..integrators import integrate
+from ..integrators.events import EventRecord, LinearEvent
 
 #: Options of every research tool called without integrator options (the contract's defaults).
 DEFAULT_OPTIONS = {"method": "rkmk853", "rtol": 1e-10, "atol": 1e-12}
-
-try:  # the integrator's own event machinery, when this tree has it
-    from ..integrators.events import LinearEvent  # type: ignore[attr-defined]
-except ImportError:  # pragma: no cover - depends on the integrator's version
-    LinearEvent = None  # type: ignore[assignment]
-
-try:
-    from ..integrators.events import EventRecord  # type: ignore[attr-defined]
-except ImportError:  # pragma: no cover - depends on the integrator's version
-    EventRecord = None  # type: ignore[assignment]
-
-
-def integrator_has_events() -> bool:
-    """True iff :func:`liesuslov.integrate` accepts ``events`` and ``dense_output``."""
-    params = inspect.signature(integrate).parameters
-    return "events" in params and "dense_output" in params
 
 
 def options_with_defaults(options: dict) -> dict:
@@ -152,47 +135,13 @@ def check_span(t_span, name: str = "t_span") -> tuple[float, float]:
 
 
 # ------------------------------------------------------------------------------------------ events
-class PlaneEvent:
-    """A linear functional of the state, ``a . omega + b . Gamma + sum(c * g) - offset`` (fallback form).
-
-    The same constructor as the integrator's ``LinearEvent``; coefficient arrays may carry batch axes
-    (one plane per trajectory). Callable as an event function ``event(t, Omega, Gamma, g)``.
-    """
-
-    def __init__(self, omega=None, Gamma=None, g=None, offset=0.0, terminal: bool = False, direction: int = 0):
-        self.omega = None if omega is None else np.asarray(omega, dtype=float)
-        self.Gamma = None if Gamma is None else np.asarray(Gamma, dtype=float)
-        self.g = None if g is None else np.asarray(g, dtype=float)
-        self.offset = np.asarray(offset, dtype=float)
-        self.terminal = bool(terminal)
-        self.direction = int(direction)
-
-    def value(self, omega, Gamma, g) -> np.ndarray:
-        """The functional on coordinates: ``omega (..., d)``, ``Gamma (..., n)``, ``g (..., m, m)``."""
-        out = -self.offset
-        if self.omega is not None:
-            out = out + np.sum(self.omega * omega, axis=-1)
-        if self.Gamma is not None:
-            out = out + np.sum(self.Gamma * Gamma, axis=-1)
-        if self.g is not None:
-            out = out + np.sum(self.g * g, axis=(-2, -1))
-        return out
-
-    def __call__(self, t, Omega, Gamma, g):
-        m = Omega.shape[-1]
-        r, c = np.triu_indices(m, 1)
-        return self.value(Omega[..., r, c], Gamma, g)
-
-
-def make_plane(omega=None, Gamma=None, g=None, offset=0.0, direction: int = 0):
-    """A linear event: the integrator's ``LinearEvent`` when available, else :class:`PlaneEvent`."""
+def make_plane(omega=None, Gamma=None, g=None, offset=0.0, direction: int = 0) -> LinearEvent:
+    """A non-terminal :class:`LinearEvent` with the given coefficients (None: not read)."""
     kw: dict[str, Any] = {"offset": offset, "terminal": False, "direction": direction}
     for name, val in (("omega", omega), ("Gamma", Gamma), ("g", g)):
         if val is not None:
             kw[name] = val
-    if LinearEvent is not None and integrator_has_events():
-        return LinearEvent(**kw)
-    return PlaneEvent(**kw)
+    return LinearEvent(**kw)
 
 
 def flat_event(event, shape: tuple[int, ...]):
@@ -236,7 +185,7 @@ def slice_event(event, rows: np.ndarray, B: int):
 
 
 def _is_linear(event) -> bool:
-    return isinstance(event, PlaneEvent) or (LinearEvent is not None and isinstance(event, LinearEvent))
+    return isinstance(event, LinearEvent)
 
 
 @dataclass
@@ -280,18 +229,14 @@ def run_window(batch_system, omega, Gamma, g, t_span, event, direction: int, opt
     if reconstruct:
         kwargs["reconstruct"] = True
         kwargs["g0"] = g
-    if integrator_has_events():
-        return _window_events(system, omega, t_span, event, direction, kwargs, B)
-    return _window_fallback(system, omega, t_span, event, direction, kwargs, B)
+    return _window_events(system, omega, t_span, event, direction, kwargs, B)
 
 
 def _window_events(system, omega, t_span, event, direction, kwargs, B) -> Window:
     if _is_linear(event):
         ev = event
-        if int(getattr(ev, "direction", 0)) != direction:
-            ev = slice_event(event, np.arange(B), B)
-            ev = make_plane(getattr(ev, "omega", None), getattr(ev, "Gamma", None), getattr(ev, "g", None),
-                            getattr(ev, "offset", 0.0), direction=direction)
+        if int(event.direction) != direction:
+            ev = make_plane(event.omega, event.Gamma, event.g, event.offset, direction=direction)
     else:
         def ev(t, Omega, Gamma, g, _f=event):
             return _f(t, Omega, Gamma, g)
@@ -308,120 +253,18 @@ def _window_events(system, omega, t_span, event, direction, kwargs, B) -> Window
     return Window(cr, sol.omega[-1], G_end, g_end, status)
 
 
-# Fallback: a grid of _SAMPLES_PER_UNIT / rate points per unit time and a degree-7 local interpolant.
-_SAMPLES_PER_UNIT = 40.0
-_STENCIL = 8
-
-
 def _rate(system, omega, Gamma) -> float:
-    """A frequency scale of the motion (1/time) for the fallback's grid."""
+    """A frequency scale of the motion (1/time): the first window of the period search is ~32 / rate long."""
     xdot, _ = system.rhs(omega, Gamma)
     w = float(np.max(np.linalg.norm(omega, axis=-1)))
     acc = float(np.max(np.linalg.norm(xdot, axis=-1)))
     return max(1.0, w, np.sqrt(acc))
 
 
-def _window_fallback(system, omega, t_span, event, direction, kwargs, B) -> Window:
-    from scipy.interpolate import BarycentricInterpolator
-    from scipy.optimize import brentq
-
-    t0, t1 = t_span
-    rate = _rate(system, omega, kwargs.get("Gamma0"))
-    N = max(_STENCIL + 1, int(np.ceil((t1 - t0) * rate * _SAMPLES_PER_UNIT)) + 1)
-    grid = np.linspace(t0, t1, N)
-    sol = integrate(system, omega, (t0, t1), t_eval=grid, **kwargs)
-    om = sol.omega                     # (N, B, d)
-    Ga = sol.Gamma
-    gg = sol.g
-    if _is_linear(event):
-        f = event.value(om, Ga, gg) if isinstance(event, PlaneEvent) else PlaneEvent(
-            getattr(event, "omega", None), getattr(event, "Gamma", None), getattr(event, "g", None),
-            getattr(event, "offset", 0.0)).value(om, Ga, gg)
-    else:
-        tt = np.broadcast_to(grid[:, None], om.shape[:2])
-        f = np.asarray(event(tt, sol.Omega, Ga, gg), dtype=float)
-    f = np.broadcast_to(f, om.shape[:2])
-    lo, hi = f[:-1], f[1:]
-    up = (lo < 0.0) & (hi >= 0.0)
-    down = (lo > 0.0) & (hi <= 0.0)
-    hit = up if direction > 0 else down if direction < 0 else (up | down)
-    ks, bs = np.nonzero(hit)
-    ts, idx, oms, Gs, gs = [], [], [], [], []
-    D = system.constraints
-    for k, b in zip(ks.tolist(), bs.tolist(), strict=True):
-        j0 = min(max(k - _STENCIL // 2 + 1, 0), N - _STENCIL)
-        sl = slice(j0, j0 + _STENCIL)
-        tk = grid[sl]
-        scale = tk[-1] - tk[0]
-        xs = (tk - tk[0]) / scale
-        fi = BarycentricInterpolator(xs, f[sl, b])
-        lo_x, hi_x = (grid[k] - tk[0]) / scale, (grid[k + 1] - tk[0]) / scale
-        if f[k + 1, b] == 0.0:
-            xr = hi_x
-        else:
-            xr = brentq(lambda s, fi=fi: float(fi(s)), lo_x, hi_x, xtol=1e-15, rtol=1e-15)
-        ts.append(tk[0] + xr * scale)
-        idx.append(b)
-        oms.append(D.project(BarycentricInterpolator(xs, om[sl, b])(xr)))
-        if Ga is not None:
-            G = BarycentricInterpolator(xs, Ga[sl, b])(xr)
-            Gs.append(G / np.linalg.norm(G))
-        if gg is not None:
-            m = gg.shape[-1]
-            gi = BarycentricInterpolator(xs, gg[sl, b].reshape(_STENCIL, -1))(xr).reshape(m, m)
-            U, _, Vt = np.linalg.svd(gi)
-            gs.append(U @ Vt)
-    d = om.shape[-1]
-    n = system.n
-    if ts:
-        order = np.lexsort((np.asarray(ts), np.asarray(idx)))
-        cr = Crossings(np.asarray(ts)[order], np.asarray(idx, dtype=int)[order], np.asarray(oms)[order],
-                       np.asarray(Gs)[order] if Ga is not None else None,
-                       np.asarray(gs)[order] if gg is not None else None)
-    else:
-        cr = Crossings.empty(d, n, Ga is not None, gg is not None)
-    status = np.full(B, int(sol.status))
-    return Window(cr, om[-1], None if Ga is None else Ga[-1], None if gg is None else gg[-1], status)
-
-
-def make_record(cr: Crossings, n: int | None, algebra_name: str):
-    """An :class:`EventRecord` (the integrator's class when available) from flat crossings."""
-    Omega = None
-    if algebra_name.startswith("so(") and n is not None:
-        from ..algebra import so
-
-        Omega = so(n).hat(cr.omega)
-    if EventRecord is not None:
-        try:
-            return EventRecord(t=cr.t, index=cr.index, omega=cr.omega, Gamma=cr.Gamma, g=cr.g, n=n,
-                               algebra_name=algebra_name)
-        except TypeError:  # pragma: no cover - a different constructor: fall back to ours
-            pass
-    return SectionRecord(t=cr.t, index=cr.index, omega=cr.omega, Omega=Omega, Gamma=cr.Gamma, g=cr.g)
-
-
-@dataclass
-class SectionRecord:
-    """Crossings of a section (the fields of the integrator's ``EventRecord``).
-
-    Attributes
-    ----------
-    t : ndarray, shape (K,)
-        Crossing times, sorted by (index, t).
-    index : ndarray of int, shape (K,)
-        Flat (C-order) batch index of the trajectory that crossed.
-    omega : ndarray, shape (K, d)
-    Omega : ndarray, shape (K, n, n), or None
-    Gamma : ndarray, shape (K, n), or None
-    g : ndarray, shape (K, m, m), or None
-    """
-
-    t: np.ndarray
-    index: np.ndarray
-    omega: np.ndarray
-    Omega: np.ndarray | None
-    Gamma: np.ndarray | None
-    g: np.ndarray | None
+def make_record(cr: Crossings, n: int | None, algebra_name: str) -> EventRecord:
+    """An :class:`EventRecord` from flat crossings."""
+    return EventRecord(t=cr.t, index=cr.index, omega=cr.omega, Gamma=cr.Gamma, g=cr.g, n=n,
+                       algebra_name=algebra_name)
 
 
 def run_plain(system, omega, Gamma, g, t_span, opts: dict) -> tuple[np.ndarray, np.ndarray]:

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from ..integrators.events import coordinate_plane, gamma_crossing, return_plane  # re-exported
 from . import _runner as R
 
 __all__ = ["poincare_section", "plane", "coordinate_plane", "gamma_crossing", "return_plane"]
@@ -33,42 +34,11 @@ def plane(omega=None, Gamma=None, g=None, offset=0.0):
 
     Returns
     -------
-    The integrator's ``LinearEvent`` (or an equivalent callable).
+    LinearEvent
     """
     if omega is None and Gamma is None and g is None:
         raise ValueError("plane needs at least one of omega=, Gamma=, g= (the coefficients of the functional)")
     return R.make_plane(omega, Gamma, g, offset)
-
-
-try:  # the integrator's built-in sections (re-exported: one implementation)
-    from ..integrators.events import coordinate_plane, gamma_crossing, return_plane
-except ImportError:  # pragma: no cover - an integrator without events: the same helpers on the fallback
-    def coordinate_plane(variable: str, index: int, value: float = 0.0, *, dim: int, terminal: bool = False,
-                         direction: int = 0):
-        """The plane ``omega[index] = value`` or ``Gamma[index] = value`` (``dim``: d or n)."""
-        if variable not in ("omega", "Gamma"):
-            raise ValueError(f"variable must be 'omega' or 'Gamma', got {variable!r}")
-        if not -dim <= index < dim:
-            raise ValueError(f"index {index} is out of range for {variable} of dimension {dim}")
-        coef = np.zeros(dim)
-        coef[index] = 1.0
-        return R.make_plane(**{variable: coef}, offset=value, direction=direction)
-
-    def gamma_crossing(n: int, index: int = -1, *, terminal: bool = False, direction: int = 0):
-        """``Gamma[index] = 0`` (default the last component, Gamma_n)."""
-        return coordinate_plane("Gamma", index, 0.0, dim=n, direction=direction)
-
-    def return_plane(system, Omega0, Gamma0=None, *, terminal: bool = False, direction: int = 1):
-        """The plane through each initial reduced state, normal to the reduced velocity there."""
-        b = R.prepare(system, Omega0, Gamma0)
-        xdot, Gdot = system.rhs(b.omega, b.Gamma)
-        off = np.sum(xdot * b.omega, axis=-1)
-        if Gdot is not None:
-            off = off + np.sum(Gdot * b.Gamma, axis=-1)
-        shape = b.shape
-        return R.make_plane(omega=xdot.reshape(shape + xdot.shape[-1:]),
-                            Gamma=None if Gdot is None else Gdot.reshape(shape + Gdot.shape[-1:]),
-                            offset=off.reshape(shape), direction=direction)
 
 
 def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, direction: int = 1,
