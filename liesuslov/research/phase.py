@@ -1,10 +1,10 @@
 r"""Reconstruction phase: the period of a periodic reduced motion and the monodromy of the attitude.
 
-When the reduced state ``s = (Omega, Gamma)`` is periodic with period ``T``, left invariance gives
-``g(t + T) = g(t) R`` with a constant ``R = g(t0)^{-1} g(t0 + T)`` in SO(n), the same for every ``g0``
-(``g0 h`` solves the same equation: ``(g0 h)^{-1} (g0 h)(T) = h^{-1} ... `` with ``h = I`` at t0). Since
-``Gamma = g^T gamma`` returns, ``R Gamma0 = Gamma0``; without a potential the spatial momentum
-``m = g M`` is constant and ``M`` returns, so ``R M0 = M0``.
+When the reduced state ``s = (Omega, Gamma)`` is periodic with period ``T``, ``t -> g(t + T)`` and
+``t -> g(t) R`` both solve ``g' = g Omega(t)`` and agree at ``t0``, so ``g(t + T) = g(t) R`` with the constant
+``R = g(t0)^{-1} g(t0 + T)`` in SO(n); left multiplication ``g -> h g`` (a symmetry) leaves R unchanged, so R
+does not depend on ``g0``. Since ``Gamma = g^T gamma`` returns, ``R Gamma0 = Gamma0``; for the free body the
+spatial momentum ``m = g M`` is constant and ``M`` returns, so ``R M0 = M0``.
 
 For the free rigid body (n = 3, D the whole algebra, V = 0) Montgomery's formula splits the rotation
 angle about ``M0`` into a dynamic and a geometric part (derived in ``docs/reconstruction.md``):
