@@ -301,6 +301,19 @@ def test_no_return_is_a_clear_error_or_status():
     assert ph.status == 1 and np.isnan(ph.period) and np.all(np.isnan(ph.monodromy))
 
 
+def test_equilibrium_has_no_period():
+    """A steady rotation about a principal axis is an equilibrium of the reduced flow: a clear error."""
+    J = np.array([1.0, 2.0, 3.0])
+    x0 = coords3([[0.3, 0.2, 1.0], [0.0, 0.0, 1.0]])
+    with pytest.raises(ValueError, match="trajectory 1 .* equilibrium"):
+        ls.reconstruction_phase(free_body(J), x0)
+    # with a given period the monodromy of a steady rotation is exp(T Omega0)
+    from scipy.linalg import expm
+
+    ph = ls.reconstruction_phase(free_body(J), x0[1], period=2.0)
+    assert np.max(np.abs(ph.monodromy - expm(2.0 * ls.hat3([0.0, 0.0, 1.0])))) < 1e-10
+
+
 def test_quasi_periodic_motion_has_no_return():
     """Lagrange n = 3: the reduced motion lives on a 2-torus (quasi-periodic): no return within t_max."""
     case = C.lagrange3(1.0, 0.5, 2.0)

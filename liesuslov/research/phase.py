@@ -346,6 +346,10 @@ def _search(system, b, s0, scale, tol, t_max, opts, T, Rm, status, dist, count) 
     off = np.sum(xdot * b.omega, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot * b.Gamma, axis=-1))
     plane = R.make_plane(omega=xdot, Gamma=Gdot, offset=off, direction=1)
     speed = np.sqrt(np.sum(xdot ** 2, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot ** 2, axis=-1)))
+    still = np.nonzero(speed <= 1e-14 * np.maximum(scale, 1.0))[0]
+    if still.size:
+        raise ValueError(f"Omega0: the initial state of trajectory {int(still[0])} (flat index) is an equilibrium of "
+                         "the reduced flow (zero velocity): it has no period; pass period= to get R = exp(T Omega0)")
     # the first return cannot come before the state has moved away: ignore crossings closer to t0
     # than a rounding-level time (a root located at t0 itself)
     t_min = 1e-9 * (1.0 + scale / np.maximum(speed, np.finfo(float).tiny))
