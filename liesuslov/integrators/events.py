@@ -101,15 +101,16 @@ class LinearEvent:
         Coefficients ``c`` on the attitude's entries.
     offset : float or array_like, shape (...)
     terminal : bool
+        Stop the trajectory at its first crossing.
     direction : {-1, 0, 1}
-
-    Leading axes are batch axes: a per-trajectory plane (e.g. through each initial state) broadcasts
-    against the batch of ``integrate``.
+        Only crossings where the value goes down (-1), up (+1), or both (0).
 
     Notes
     -----
-    Callable like any event: ``event(t, Omega, Gamma, g)`` with Omega as skew matrices or coordinates.
-    The compiled kernel reads the coefficients instead of calling it.
+    Leading axes of the coefficients are batch axes: a per-trajectory plane (e.g. through each initial
+    state) broadcasts against the batch of ``integrate``. Callable like any event:
+    ``event(t, Omega, Gamma, g)`` with Omega as skew matrices or coordinates; the compiled kernel reads
+    the coefficients instead of calling it.
     """
 
     def __init__(self, omega=None, Gamma=None, g=None, offset=0.0, *, terminal: bool = False,
