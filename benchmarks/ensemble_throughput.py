@@ -22,7 +22,7 @@ def main() -> None:
     a = p.parse_args()
     r = benchmark(a.n, tuple(a.workers), n_throughput=a.n_throughput, executor=a.executor)
     print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; scene: {r['scene']}; "
-          f"executor: {r['executor']}\n")
+          f"executor: {r['executor']}, backend: {r['backend']}\n")
     print("| workers | trajectories | seconds | trajectories/s |\n|---|---|---|---|")
     for row in r["throughput"]:
         print(f"| {row['workers']} | {row['trajectories']:,} | {row['seconds']:.2f} | {row['per_second']:,.0f} |")

@@ -52,6 +52,7 @@ MANIFEST = "manifest.json"
 _ARRAYS = ("xi", "omega", "Gamma", "g")
 _INIT_KEYS = ("Omega0", "Gamma0", "g0")
 _SUMMED = ("nfev", "steps", "rejected")
+_STAT = "stats__"  # shard key prefix of a per-trajectory statistic (e.g. stats__trajectory_steps)
 _CORE = {"Omega0": None, "Gamma0": 1, "g0": 2}  # trailing (non-batch) axes; Omega0's is 1 or 2
 # Exceptions a task raises on bad input: deterministic, so they are raised here, never retried.
 _USER_ERRORS = (ValueError, TypeError)
@@ -227,7 +228,14 @@ def _integrate_chunk(task: _Task) -> dict[str, Any]:
     # status: an int per trajectory (the per-trajectory integrate), or one int for the whole batch
     out["status"] = np.broadcast_to(np.asarray(sol.status, dtype=np.int64).reshape(-1) if np.ndim(sol.status)
                                     else np.asarray(sol.status, dtype=np.int64), (c,)).copy()
-    out["meta"] = {"stats": sol.stats, "message": str(getattr(sol, "message", "")), "n": sol.n,
+    # per-trajectory statistics (arrays of the batch shape) travel as arrays; the rest in the JSON meta
+    stats = {}
+    for k, v in sol.stats.items():
+        if isinstance(v, np.ndarray) and v.size == c and v.ndim >= 1:
+            out[_STAT + k] = v.reshape(c)
+        else:
+            stats[k] = v
+    out["meta"] = {"stats": stats, "message": str(getattr(sol, "message", "")), "n": sol.n,
                    "algebra_name": sol.algebra_name}
     return out
 
@@ -272,7 +280,9 @@ class Ensemble:
         ``nfev``, ``steps``, ``rejected`` summed over chunks; ``chunks``, ``chunk_size``,
         ``failed_chunks`` (list of ``{"chunk", "start", "stop", "error"}``), ``retries``,
         ``wall_time``, ``executor``, ``seed`` (the entropy of a sampler run), and the first chunk's
-        ``method``, ``chart``, ``form``, ``backend``.
+        ``method``, ``chart``, ``form``, ``backend``; statistics integrate reports per trajectory
+        (arrays of the batch shape, e.g. ``trajectory_steps``) assembled over the whole batch (0 or
+        NaN for a failed or missing chunk).
     batch_shape : tuple of int
     complete : bool
         False for a store some of whose chunks are missing (their status is -1, their values NaN).
@@ -280,12 +290,14 @@ class Ensemble:
     """
 
     def __init__(self, *, t, batch_shape, bounds, tails, stats, n=None, algebra_name="", message="",
-                 arrays=None, status=None, store=None, present=None):
+                 arrays=None, status=None, store=None, present=None, traj_stats=None):
         self._t = np.asarray(t, dtype=float)
         self.batch_shape = tuple(int(b) for b in batch_shape)
         self._bounds = [tuple(map(int, b)) for b in bounds]
         self._tails = {k: tuple(v) for k, v in tails.items()}
-        self.stats = stats
+        self._stats = stats
+        # per-trajectory statistics: {name: (B,) array} in memory, {name: dtype string} for a store
+        self._traj_stats = traj_stats or {}
         self.n = n
         self.algebra_name = algebra_name
         self.message = message
@@ -323,6 +335,23 @@ class Ensemble:
         from .algebra import so
 
         return so(self.n).hat(self.omega)
+
+    @property
+    def stats(self) -> dict:
+        out = dict(self._stats)
+        for name, v in self._traj_stats.items():
+            out[name] = (v if isinstance(v, np.ndarray) else self._assemble_stat(name, v)).reshape(self.batch_shape)
+        return out
+
+    def _assemble_stat(self, name: str, dtype: str) -> np.ndarray:
+        dt = np.dtype(dtype)
+        out = np.full(self._B, np.nan if dt.kind == "f" else 0, dtype=dt)
+        for i, (a, b) in enumerate(self._bounds):
+            if self._has(i):
+                with np.load(self._shard(i), allow_pickle=False) as z:
+                    if _STAT + name in z.files:
+                        out[a:b] = z[_STAT + name]
+        return out
 
     @property
     def status(self) -> np.ndarray:
@@ -384,7 +413,7 @@ class Ensemble:
         """All of it as a :class:`~liesuslov.Solution` (in memory)."""
         from .integrators import Solution
 
-        return Solution(t=self.t, xi=self.xi, omega=self.omega, Gamma=self.Gamma, g=self.g, stats=dict(self.stats),
+        return Solution(t=self.t, xi=self.xi, omega=self.omega, Gamma=self.Gamma, g=self.g, stats=self.stats,
                         status=self.status, message=self.message, n=self.n, algebra_name=self.algebra_name)
 
     def to_xarray(self):
@@ -446,8 +475,9 @@ def _write_manifest(store: Path, manifest: dict) -> None:
 
 
 def _write_shard(store: Path, i: int, payload: dict) -> None:
-    arrays = {k: payload[k] for k in ("t", *_ARRAYS, "status") if k in payload}
-    meta = np.array(json.dumps(payload["meta"], default=_jsonable))
+    arrays = {k: v for k, v in payload.items() if k in ("t", *_ARRAYS, "status") or k.startswith(_STAT)}
+    # UTF-8 bytes, not a numpy unicode string (4 bytes a character)
+    meta = np.frombuffer(json.dumps(payload["meta"], default=_jsonable).encode(), dtype=np.uint8)
     _atomic_write(store / _shard_name(i), lambda f: np.savez(f, **arrays, __meta__=meta), ".npz")
 
 
@@ -492,16 +522,23 @@ def open_ensemble(store) -> Ensemble:
         with np.load(root / _shard_name(first), allow_pickle=False) as z:
             t = z["t"]
             tails = {k: z[k].shape[2:] for k in _ARRAYS if k in z.files}
-            meta = json.loads(str(z["__meta__"]))
+            meta = json.loads(z["__meta__"].tobytes().decode())
     missing = len(bounds) - sum(present)
     message = man.get("message", "")
     if missing:
         message = (f"{missing} of {len(bounds)} chunks missing from the store (status -1, values NaN); "
                    "the run was interrupted or is still going. " + message).strip()
     stats = dict(man.get("stats", {}))
+    traj_stats = man.get("trajectory_stats")
+    if traj_stats is None:
+        first = next((i for i, p in enumerate(present) if p), None)
+        traj_stats = {}
+        if first is not None:
+            with np.load(root / _shard_name(first), allow_pickle=False) as z:
+                traj_stats = {k[len(_STAT):]: z[k].dtype.str for k in z.files if k.startswith(_STAT)}
     return Ensemble(t=t, batch_shape=man["batch_shape"], bounds=bounds, tails=tails, stats=stats,
                     n=meta.get("n"), algebra_name=meta.get("algebra_name", ""), message=message,
-                    store=root, present=present)
+                    store=root, present=present, traj_stats=traj_stats)
 
 
 # ====================================================================== executors
@@ -705,7 +742,8 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     bar = _progress_bar(progress, B)
     started = time.perf_counter()
     collected: dict[str, Any] = {"arrays": None, "status": np.full(B, -1, dtype=np.int64), "t": None,
-                                 "tails": None, "meta": None, "stats": [], "failed": [], "retries": 0}
+                                 "tails": None, "meta": None, "stats": [], "failed": [], "retries": 0,
+                                 "traj_stats": {}}
     try:
         _run_all(executor, make_task, bounds, retries, max_in_flight, collected, root, bar)
     finally:
@@ -729,7 +767,8 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     if root is not None:
         manifest.update({"complete": True, "t": t_out, "tails": {k: list(v) for k, v in tails.items()},
                          "meta": {"n": meta.get("n"), "algebra_name": meta.get("algebra_name", "")},
-                         "stats": stats, "message": message})
+                         "stats": stats, "message": message,
+                         "trajectory_stats": {k: v.dtype.str for k, v in collected["traj_stats"].items()}})
         _write_manifest(root, manifest)
         ens = open_ensemble(root)
         ens.message = message
@@ -740,7 +779,7 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
         arrays = {k: np.full((t_out.size,) + batch_shape + v, np.nan) for k, v in tails.items()}
     return Ensemble(t=t_out, batch_shape=batch_shape, bounds=bounds, tails=tails, stats=stats, n=meta.get("n"),
                     algebra_name=meta.get("algebra_name", ""), message=message, arrays=arrays,
-                    status=collected["status"].reshape(batch_shape))
+                    status=collected["status"].reshape(batch_shape), traj_stats=collected["traj_stats"])
 
 
 def _run_all(executor, make_task, bounds, retries, max_in_flight, collected, root, bar) -> None:
@@ -809,11 +848,20 @@ def _collect(i: int, bound, payload: dict, collected: dict, root: Path | None) -
                          f"{collected['t'].shape}); reduce must keep the same times for every chunk")
     collected["status"][a:b] = payload["status"]
     collected["stats"].append(payload["meta"]["stats"])
+    B = collected["status"].size
+    for key, v in payload.items():
+        if key.startswith(_STAT):
+            name = key[len(_STAT):]
+            if name not in collected["traj_stats"]:
+                # a store keeps them in its shards: only their dtype here (memory stays bounded)
+                collected["traj_stats"][name] = (np.empty(0, dtype=v.dtype) if root is not None else
+                                                 np.full(B, np.nan if v.dtype.kind == "f" else 0, dtype=v.dtype))
+            if root is None:
+                collected["traj_stats"][name][a:b] = v
     if root is not None:
         _write_shard(root, i, payload)
         return
     if collected["arrays"] is None:
-        B = collected["status"].size
         T = payload["t"].size
         collected["arrays"] = {k: np.full((T, B) + payload[k].shape[2:], np.nan) for k in _ARRAYS if k in payload}
     for k, arr in collected["arrays"].items():
@@ -978,7 +1026,7 @@ def _benchmark_system():
 
 def benchmark(n: int = 1_000_000, workers: tuple[int, ...] = (1, 2), *, n_throughput: int = 100_000,
               chunk_size: int = 8192, h: float = 0.05, t_end: float = 1.0, store=None,
-              executor: str = "process") -> dict[str, Any]:
+              executor: str = "process", backend: str | None = None) -> dict[str, Any]:
     """Trajectories per second against workers, and the peak memory of a large final-state-only run.
 
     The scene is cheap on purpose (n = 3 Suslov body with a linear potential, RKMK4, ``t_end / h``
@@ -995,6 +1043,9 @@ def benchmark(n: int = 1_000_000, workers: tuple[int, ...] = (1, 2), *, n_throug
         A ``ProcessPoolExecutor`` or a local Dask cluster (``LocalCluster(processes=True)``).
     store : path, optional
         Directory of the memory run's store (default: a temporary one, removed afterwards).
+    backend : str, optional
+        integrate's backend; default "numba" when numba is installed (the compiled per-trajectory
+        kernel: each worker loads it from the disk cache on its first chunk, in the warm-up), else "numpy".
 
     Returns
     -------
@@ -1010,7 +1061,12 @@ def benchmark(n: int = 1_000_000, workers: tuple[int, ...] = (1, 2), *, n_throug
     system = _benchmark_system()
     Omega0 = np.array([0.0, 0.6, -0.4])
     sampler = Perturbation.around(system, Omega0, Gamma0=np.array([0.0, 0.6, 0.8]), scale=0.1)
-    opts = {"method": "rkmk4", "h": h, "reduce": "final", "sampler": sampler, "seed": 0, "chunk_size": chunk_size}
+    if backend is None:
+        import importlib.util
+
+        backend = "numba" if importlib.util.find_spec("numba") is not None else "numpy"
+    opts = {"method": "rkmk4", "h": h, "reduce": "final", "sampler": sampler, "seed": 0, "chunk_size": chunk_size,
+            "backend": backend}
 
     def pool(w: int):
         if executor == "dask":
@@ -1028,7 +1084,7 @@ def benchmark(n: int = 1_000_000, workers: tuple[int, ...] = (1, 2), *, n_throug
         return ex, ex.shutdown
 
     out: dict[str, Any] = {"throughput": [], "scene": f"SO(3) Suslov, rkmk4, {round(t_end / h)} steps, final state",
-                           "executor": executor}
+                           "executor": executor, "backend": backend}
     for w in workers:
         ex, close = pool(w)
         try:
