@@ -29,7 +29,8 @@ def main() -> None:
     m = r["memory"]
     print(f"\nMemory run: {m['trajectories']:,} trajectories on {m['workers']} workers, final state only, store: "
           f"{m['seconds']:.1f} s ({m['per_second']:,.0f}/s), {m['succeeded']:,} succeeded; peak traced memory of "
-          f"the submitting process {m['tracemalloc_peak_mb']:.1f} MB (max RSS {m['maxrss_mb']:.0f} MB); "
+          f"the submitting process {m['tracemalloc_peak_mb']:.1f} MB (max RSS {m['maxrss_mb']:.0f} MB, largest "
+          f"worker {m['worker_maxrss_mb']:.0f} MB); "
           f"store {m['store_mb']:.1f} MB.")
 
 

@@ -632,8 +632,9 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
         Root of the sampler's seeds (None: fresh entropy, recorded in ``stats["seed"]``).
     reduce : None, "final" or callable
         Done on the workers before results travel: None keeps every output time; ``"final"`` keeps
-        only the last one (time axis of length 1); a module-level callable ``reduce(sol) -> Solution``
-        (same batch axes, the same times for every chunk) anything else.
+        only the last one (time axis of length 1; NaN for a trajectory a terminal event stopped
+        earlier, as in the Solution); a module-level callable ``reduce(sol) -> Solution`` (same batch
+        axes, the same times for every chunk) anything else.
     progress : bool
         A progress bar over trajectories (needs tqdm: ``liesuslov[progress]``).
     retries : int
@@ -1052,7 +1053,8 @@ def benchmark(n: int = 1_000_000, workers: tuple[int, ...] = (1, 2), *, n_throug
     dict
         ``throughput``: list of ``{"workers", "trajectories", "seconds", "per_second"}``; ``memory``:
         ``{"trajectories", "seconds", "per_second", "tracemalloc_peak_mb", "maxrss_mb", "store_mb",
-        "workers"}`` (the peak of this, the submitting, process; worker processes hold one chunk each).
+        "workers", "worker_maxrss_mb"}`` (the peaks of this, the submitting, process, and the largest
+        worker process's maximum resident size).
     """
     import resource
     import shutil
@@ -1119,5 +1121,7 @@ def benchmark(n: int = 1_000_000, workers: tuple[int, ...] = (1, 2), *, n_throug
             shutil.rmtree(tmp, ignore_errors=True)
     out["memory"] = {"trajectories": n, "workers": w, "seconds": dt, "per_second": n / dt, "succeeded": ok,
                      "tracemalloc_peak_mb": peak / 2**20,
-                     "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "store_mb": size / 2**20}
+                     "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "store_mb": size / 2**20,
+                     # the largest worker process that has ended (the pools are shut down by now)
+                     "worker_maxrss_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024}
     return out
