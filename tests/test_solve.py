@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 import liesuslov as ls
 from liesuslov.analytic.euler_top import EulerTop
 from liesuslov.integrators import LinearEvent, coordinate_plane, gamma_crossing, return_plane
+
+from .references import embedded_reference
 
 BACKENDS = ["numpy", "auto"]
 
@@ -33,25 +34,6 @@ def kt_body():
     Omega0[:3, 3] = [0.1, 0.2, 0.3]
     Omega0[3, :3] = -Omega0[:3, 3]
     return system, Omega0, np.array([0.0, 0.0, 0.6, 0.8])
-
-
-def embedded_reference(system, omega0, T, t_eval, Gamma0=None):
-    """(omega, g) at t_eval from scipy's DOP853 on the embedded ODE (omega coordinates, vec g), rtol 1e-13."""
-    model = system.model(gamma=True if Gamma0 is not None else None)
-    n = model.n
-    gamma = None if Gamma0 is None else np.asarray(Gamma0, float)
-
-    def rhs(t, y):
-        x = y[:-n * n]
-        g = y[-n * n:].reshape(n, n)
-        xi = model.xi_from_coords(x[None])
-        G = None if gamma is None else (g.T @ gamma)[None]
-        dx = model.omega_coords(model.xi_dot(xi, G))[0]
-        return np.concatenate([dx, (g @ model.omega_matrix(xi)[0]).ravel()])
-
-    y0 = np.concatenate([omega0, np.eye(n).ravel()])
-    r = solve_ivp(rhs, (0.0, T), y0, method="DOP853", rtol=1e-13, atol=1e-15, t_eval=t_eval)
-    return r.y[:-n * n].T, r.y[-n * n:].T.reshape(-1, n, n)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -171,7 +153,7 @@ def _euler_zeros(top, component, T):
     ts = np.linspace(0.0, T, 4001)
     w = top.state(ts)[:, component]
     out = []
-    for a, b, fa, fb in zip(ts[:-1], ts[1:], w[:-1], w[1:]):
+    for a, b, fa, fb in zip(ts[:-1], ts[1:], w[:-1], w[1:], strict=True):
         if fa * fb < 0:
             out.append(brentq(lambda t: top.state(t)[component], a, b, xtol=1e-15))
     return np.array(out)

@@ -10,10 +10,10 @@ from math import prod
 from pathlib import Path
 
 import numpy as np
-
-from liesuslov.integrators.plan import make_plan
 import pytest
 from scipy.special import ellipj, ellipk
+
+from liesuslov.integrators.plan import make_plan
 
 try:
     from liesuslov.integrators import tableaux as tb

@@ -382,9 +382,10 @@ def _message(raw: RawResult) -> str:
     if failed.size:
         b = int(failed[0])
         what = FAILURES.get(int(raw.failure[b]), "failure")
-        head = ("The trajectory failed" if raw.status.size == 1
-                else f"{failed.size} of {raw.status.size} trajectories failed; the first (index {b})")
-        return f"{head} at t = {raw.t_stop[b]:.17g}: {what}."
+        head = "" if raw.status.size == 1 else (f"{failed.size} of {raw.status.size} trajectories failed; "
+                                               f"the first (index {b}): ")
+        what, _, hint = what.partition(" (")
+        return f"{head}{what} at t = {raw.t_stop[b]:.17g}" + (f" ({hint}." if hint else ".")
     if stopped:
         return (f"A terminal event stopped {stopped} of {raw.status.size} trajectories; the others reached the end."
                 if raw.status.size > 1 else f"A terminal event stopped the trajectory at t = {raw.t_stop[0]:.17g}.")

@@ -31,10 +31,10 @@ STATUS_REACHED, STATUS_TERMINAL, STATUS_FAILED = 0, 1, -1
 
 #: Why a trajectory failed (``RawResult.failure`` codes; 0 = did not fail).
 FAILURES = {
-    1: "non-finite state or field",
-    2: "step size underflow",
+    1: "non-finite state",
+    2: "step size underflow (the solution is probably singular there, or the tolerances are below rounding)",
     3: "max_steps reached",
-    4: "step beyond the chart's domain (|Theta| >= pi for the exponential): lower h",
+    4: "step beyond the chart's domain (|h Omega| too large for the exponential: lower h)",
 }
 
 #: Products ``g <- g phi(Theta)`` add ~1e-16 per step to |g^T g - I|; with ``reproject`` a Newton–Schulz step
