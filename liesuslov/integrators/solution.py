@@ -73,6 +73,7 @@ class Solution:
         ``Gamma = phi(-Theta(theta)) Gamma_k``: g in SO(n) and |Gamma| = 1 to rounding, the constraints exact,
         with the accuracy of the steps; NaN after a trajectory stopped. The steps are those of the original
         run (the solve is repeated with ``t`` as output times: a trajectory's steps do not depend on them).
+        A pickled or saved Solution keeps its arrays, not its dense output.
 
         Raises
         ------
