@@ -54,6 +54,11 @@ def md_table(header: Sequence[str], body: Iterable[Sequence[Any]]) -> str:
     return "\n".join(lines)
 
 
+def status_cell(row: dict) -> str:
+    """A row's status, with the reason when it is not "ok"."""
+    return row["status"] if row["status"] == "ok" else f"{row['status']}: {row.get('message', '')}"
+
+
 def ms(t: float) -> str:
     """Seconds as milliseconds, or a dash when not measured."""
     if not np.isfinite(t):
@@ -130,7 +135,7 @@ def summary_sections(report: BenchReport, config: BenchConfig, image_dir: str | 
     if report.throughput:
         body = [[r["n"], r["scene"], r["batch"], r.get("steps", ""), fmt(r.get("traj_steps_per_s"), ".3g"),
                  fmt(r.get("ns_per_traj_step"), ".4g"), fmt(r.get("us_per_step"), ".4g"), r.get("backend", ""),
-                 r["status"] if r["status"] == "ok" else f"{r['status']}: {r.get('message', '')}"]
+                 status_cell(r)]
                 for r in report.throughput]
         txt = ("## Batch throughput\n\nRKMK4 (exponential chart, h = 0.01) with reconstruction on SO(n), random "
                "initial data in D, one vectorised run per batch; output at the final time only.\n\n"
@@ -142,7 +147,7 @@ def summary_sections(report: BenchReport, config: BenchConfig, image_dir: str | 
     if report.scaling:
         body = [[r["n"], r["chart"], r.get("requested", ""), r.get("steps", ""), fmt(r.get("us_per_step"), ".4g"),
                  fmt(r.get("orth_defect"), ".1e"), r.get("form", ""), r.get("backend", ""),
-                 r["status"] if r["status"] == "ok" else f"{r['status']}: {r.get('message', '')}"]
+                 status_cell(r)]
                 for r in report.scaling]
         fits = "; ".join(f"{c}: time per step ∝ n^{v['exponent']:.2f} (fit over n = {v['sizes']})"
                          for c, v in report.scaling_exponent.items()) or "no fit (fewer than two sizes)"
@@ -158,7 +163,8 @@ def summary_sections(report: BenchReport, config: BenchConfig, image_dir: str | 
         body = [[r["scene"], r["method"], r["h"], r["steps"], fmt(r.get("wall_time"), ".3g"),
                  fmt(r.get("us_per_step"), ".3g"), fmt(r.get("orth_defect"), ".1e"),
                  fmt(r.get("sphere_defect"), ".1e"), fmt(r.get("energy_error"), ".1e"), fmt(r.get("energy0"), ".4g"),
-                 r["status"]] for r in report.longrun]
+                 status_cell(r)]
+                for r in report.longrun]
         sec.append("## Long run\n\nOne trajectory, fixed step, output every 1% of the interval.\n\n"
                    + md_table(["scene", "method", "h", "steps", "wall time (s)", "µs per step", "max|gᵀg − I|",
                                 "max||Γ| − 1|", "max|E − E0|", "E0", "status"], body))
