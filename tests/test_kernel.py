@@ -1,0 +1,374 @@
+"""The compiled solve (:mod:`liesuslov.integrators.kernel`): the method of the numpy stepper to rounding, per
+trajectory, with dense output, events, failures and exact structure.
+
+The first test compiles the kernel (cached on disk after that).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import liesuslov as ls
+
+pytest.importorskip("numba")
+
+from liesuslov.integrators import kernel  # noqa: E402
+from liesuslov.integrators.integrate import METHODS  # noqa: E402
+from liesuslov.integrators.plan import make_plan  # noqa: E402
+from liesuslov.integrators.problem import Problem  # noqa: E402
+from liesuslov.integrators.tableaux import get_tableau  # noqa: E402
+
+EPS = np.finfo(float).eps
+# one step of every tableau: the fixed-step methods, and the adaptive ones with a loose tolerance
+STEP_METHODS = ["lie-euler", "rkmk2", "rkmk-heun", "rkmk3", "rkmk4", "rkmk5", "rkmk8", "rkmk23", "rkmk45",
+                "rkmk853"]
+
+
+def make_problem(model, xi0, *, G0=None, gamma=None, mode="none", chart="exp", kind=None, method="rkmk4", h=0.0,
+                 t_span=(0.0, 1.0), rtol=1e-8, atol=1e-10, t_eval=None, max_steps=10**7, reproject=True,
+                 event_coef=None, event_offset=None, event_terminal=None, event_direction=None, tableau=None):
+    """A Problem as the front door builds it (batch flattened)."""
+    meth = METHODS[method]
+    plan = make_plan(get_tableau(tableau or meth.tableau))
+    xi0 = np.atleast_2d(np.asarray(xi0, float))
+    B, k = xi0.shape
+    m = 0 if mode == "none" else int(model.n)
+    q = {"none": 0, "gamma": m, "g": m * m}[mode]
+    G0 = np.zeros((B, 0)) if G0 is None else np.asarray(G0, float).reshape(B, q)
+    gamma = np.zeros((B, 0)) if gamma is None else np.asarray(gamma, float).reshape(B, -1)
+    if kind is None:
+        kind = kernel.kind_for(model, mode, chart)
+    skew = model.algebra.name.startswith("so(")
+    E = 0 if event_coef is None else event_coef.shape[1]
+    linear = [(np.ascontiguousarray(event_coef[:, e]), np.ascontiguousarray(event_offset[:, e])) for e in range(E)]
+    if E:
+        event_terminal = np.zeros(E, np.int64) if event_terminal is None else np.asarray(event_terminal, np.int64)
+        event_direction = np.zeros(E, np.int64) if event_direction is None else np.asarray(event_direction, np.int64)
+    return Problem(model=model, mode=mode, chart=chart if mode != "none" else None, kind=kind, skew=skew, plan=plan,
+                   k=k, m=m, q=q, B=B, xi0=np.ascontiguousarray(xi0), G0=np.ascontiguousarray(G0),
+                   gamma=np.ascontiguousarray(gamma), t0=float(t_span[0]), t1=float(t_span[1]),
+                   adaptive=meth.adaptive, h=float(h), rtol=rtol, atol=atol, max_steps=max_steps,
+                   t_eval=None if t_eval is None else np.asarray(t_eval, float), events=[None] * E, event_linear=linear,
+                   event_coef=event_coef, event_offset=event_offset, event_terminal=event_terminal,
+                   event_direction=event_direction, reproject=reproject)
+
+
+def rotations(rng, B, n):
+    Q = np.linalg.qr(rng.normal(size=(B, n, n)))[0]
+    Q[:, :, 0] *= np.sign(np.linalg.det(Q))[:, None]
+    return Q
+
+
+def unit(rng, B, n):
+    v = rng.normal(size=(B, n))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def general_system(n, rng, potential=True):
+    Q = np.linalg.qr(rng.normal(size=(n, n)))[0]
+    I = Q @ np.diag(np.linspace(1.0, 2.5, n)) @ Q.T
+    S = rng.normal(size=(n, n))
+    pot = ls.QuadraticPotential(S + S.T) if potential else None
+    return ls.SuslovSystem(ls.Inertia.from_mass_tensor(I), potential=pot)
+
+
+def fk_system(n, rng):
+    A = rng.normal(size=(n, n)) * 0.2
+    I = np.diag(np.linspace(1.0, 2.0, n)) + A @ A.T
+    return ls.SuslovSystem(ls.Inertia.from_mass_tensor(I), constraints="fedorov_kozlov")
+
+
+def scenes():
+    """(name, model, kind) for every kind: so3, dense n = 4 and 5, lowrank n = 8."""
+    rng = np.random.default_rng(1)
+    out = [("so3", ls.cases.gyroscopic3([1.0, 2.0, 2.5], 0.7, ls.QuadraticPotential([1.0, 2.0, 0.5])).system
+            .model(gamma=True), "so3")]
+    for n in (4, 5):
+        out.append((f"dense{n}", general_system(n, rng).model(gamma=True), "dense"))
+    out.append(("lowrank8", fk_system(8, rng).model(gamma=False), "lowrank"))
+    return out
+
+
+SCENES = scenes()
+
+
+def numpy_solve(problem):
+    from liesuslov.integrators import solve_numpy
+
+    return solve_numpy.solve(problem)
+
+
+def assert_same_run(a, b, atol=1e-12):
+    """The compiled run ``a`` against the numpy run ``b``: counts equal, states to rounding."""
+    for key in ("status", "failure", "nfev", "steps", "rejected"):
+        np.testing.assert_array_equal(getattr(a, key), getattr(b, key), err_msg=key)
+    np.testing.assert_allclose(a.t_stop, b.t_stop, rtol=1e-12)
+    np.testing.assert_allclose(a.xi, b.xi, rtol=0, atol=atol * max(1.0, np.nanmax(np.abs(b.xi))))
+    np.testing.assert_allclose(a.G, b.G, rtol=0, atol=atol)
+
+
+@pytest.mark.parametrize("mode", ["g", "gamma"])
+@pytest.mark.parametrize("chart", ["exp", "cayley"])
+@pytest.mark.parametrize("scene", range(len(SCENES)), ids=[s[0] for s in SCENES])
+def test_every_tableau_agrees_with_the_numpy_solver(scene, chart, mode):
+    name, model, kind = SCENES[scene]
+    if mode == "gamma" and not model.has_gamma:
+        pytest.skip("no vertical in this model")
+    rng = np.random.default_rng(scene)
+    B, n = 2, model.n
+    xi = rng.normal(size=(B, model.k))
+    gamma = unit(rng, B, n) if model.has_gamma else None
+    G = rotations(rng, B, n).reshape(B, -1) if mode == "g" else unit(rng, B, n)
+    for method in STEP_METHODS:
+        adaptive = METHODS[method].adaptive
+        p = make_problem(model, xi, G0=G, gamma=gamma if mode == "g" else None, mode=mode, chart=chart, kind=kind,
+                         method=method, h=0.0 if adaptive else 0.1, t_span=(0.0, 0.55),
+                         t_eval=[0.0, 0.13, 0.4, 0.55], rtol=1e-7, atol=1e-9)
+        res = kernel.solve(p)
+        assert res.backend == "numba" and np.all(res.status == 0), method
+        assert_same_run(res, numpy_solve(p))
+
+
+def test_kinds_and_check():
+    rng = np.random.default_rng(0)
+    so3 = SCENES[0][1]
+    assert kernel.kind_for(so3, "g", "exp") == "so3"
+    assert kernel.kind_for(so3, "none", None) is None
+    assert kernel.kind_for(SCENES[1][1], "g", "exp") == "dense"
+    fk = fk_system(16, rng).model(gamma=False)
+    assert kernel.kind_for(fk, "g", "cayley") == "lowrank"
+    p = make_problem(so3, np.zeros((1, so3.k)), G0=np.eye(3).ravel(), mode="g", event_coef=np.zeros((1, 1, 11)),
+                     event_offset=np.zeros((1, 1)))
+    p.event_coef = None
+    with pytest.raises(kernel.NotCompilable, match="callable"):
+        kernel.check(p)
+    assert issubclass(kernel.NotCompilable, ValueError)
+    user = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])),
+                           potential=ls.Potential(lambda G: np.sum(G ** 4, axis=-1),
+                                                  lambda G: 4 * G ** 3)).model(gamma=True)
+    with pytest.raises(kernel.NotCompilable, match="polynomial"):
+        kernel.check(make_problem(user, np.zeros((1, user.k)), G0=[0.0, 0.0, 1.0], mode="gamma"))
+
+
+def test_batch_equals_alone_bitwise():
+    rng = np.random.default_rng(5)
+    model = ls.cases.klebsh_tisserand([1.0, 1.3, 1.7, 2.0], [4.0, 3.5, 3.0, 1.0]).system.model(gamma=True)
+    B = 6
+    xi = rng.normal(size=(B, model.k)) * np.array([0.3, 1.0, 3.0, 0.5, 2.0, 1.0])[:, None]
+    g = rotations(rng, B, 4).reshape(B, -1)
+    gamma = unit(rng, B, 4)
+    for method, chart in (("rkmk45", "exp"), ("rkmk853", "cayley")):
+        kw = dict(mode="g", chart=chart, method=method, t_span=(0.0, 3.0), t_eval=np.linspace(0.0, 3.0, 7),
+                  rtol=1e-9, atol=1e-11)
+        full = kernel.solve(make_problem(model, xi, G0=g, gamma=gamma, **kw))
+        assert np.all(full.status == 0)
+        assert len(set(full.steps.tolist())) > 1  # trajectories take their own steps
+        for b in (0, 3, 5):
+            one = kernel.solve(make_problem(model, xi[b:b + 1], G0=g[b:b + 1], gamma=gamma[b:b + 1], **kw))
+            np.testing.assert_array_equal(one.xi[:, 0], full.xi[:, b])
+            np.testing.assert_array_equal(one.G[:, 0], full.G[:, b])
+            for key in ("nfev", "steps", "rejected", "t_stop"):
+                assert getattr(one, key)[0] == getattr(full, key)[b], key
+
+
+def test_failure_is_isolated():
+    rng = np.random.default_rng(2)
+    model = SCENES[1][1]
+    B = 4
+    xi = rng.normal(size=(B, model.k))
+    xi[2, 0] = np.nan
+    g = rotations(rng, B, 4).reshape(B, -1)
+    gamma = unit(rng, B, 4)
+    kw = dict(mode="g", method="rkmk45", t_span=(0.0, 1.0), t_eval=[0.0, 0.5, 1.0])
+    res = kernel.solve(make_problem(model, xi, G0=g, gamma=gamma, **kw))
+    assert res.status.tolist() == [0, 0, -1, 0]
+    assert res.failure[2] == 1 and res.t_stop[2] == 0.0
+    assert np.all(np.isnan(res.xi[1:, 2])) and np.all(np.isnan(res.G[1:, 2]))
+    one = kernel.solve(make_problem(model, xi[3:], G0=g[3:], gamma=gamma[3:], **kw))
+    np.testing.assert_array_equal(one.xi[:, 0], res.xi[:, 3])
+    # max_steps: code 3, the time it stopped, never a hang
+    res = kernel.solve(make_problem(model, xi[:1], G0=g[:1], gamma=gamma[:1], max_steps=5, **kw))
+    assert res.status[0] == -1 and res.failure[0] == 3 and 0.0 < res.t_stop[0] < 1.0
+    assert res.steps[0] + res.rejected[0] == 5
+
+
+def euler_top():
+    """A free symmetric top in so(3) (no constraint): omega_3 constant, omega_1 = cos(lam t) from (1, 0, w3)."""
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 1.0, 2.0])), constraints="none")
+    return system.model(gamma=False)
+
+
+def test_events_against_a_closed_form():
+    model = euler_top()
+    w3 = 2.0
+    x = np.array([[1.0, 0.0, w3]])
+    xi = model.xi_from_coords(x)
+    Bm = model.omega_coords(np.eye(model.k))  # omega = xi @ Bm
+    coef = np.zeros((1, 2, model.k))
+    coef[0, 0] = Bm[:, 0]  # omega_1 = 0, both directions
+    coef[0, 1] = Bm[:, 0]  # omega_1 = 0 upward, terminal
+    p = make_problem(model, xi, mode="none", method="rkmk853", t_span=(0.0, 20.0), t_eval=np.linspace(0, 20, 5),
+                     rtol=1e-10, atol=1e-12, event_coef=coef, event_offset=np.zeros((1, 2)),
+                     event_terminal=[0, 1], event_direction=[0, 1])
+    res = kernel.solve(p)
+    t = res.event_t[0]
+    # the frequency from the trajectory's own period: crossings are equally spaced at pi / lam
+    lam = np.pi / np.diff(t).mean()
+    np.testing.assert_allclose(t, (np.pi / 2 + np.pi * np.arange(len(t))) / lam, rtol=0, atol=1e-9)
+    assert res.status[0] == 1 and res.t_stop[0] == res.event_t[1][0]
+    om = res.event_xi[0] @ Bm
+    np.testing.assert_allclose(om[:, 0], 0.0, atol=1e-10)
+    # the terminal upward crossing: omega_2 at it has the sign of an upward crossing of omega_1
+    assert len(res.event_t[1]) == 1 and t[0] < res.event_t[1][0] < t[2] + 1e-12
+    assert np.isnan(res.xi[-1, 0]).all() and not np.isnan(res.xi[0, 0]).any()
+    # the same events over a batch, indices sorted
+    p = make_problem(model, np.repeat(xi, 3, axis=0) * np.array([[1.0], [0.5], [2.0]]), mode="none",
+                     method="rkmk45", t_span=(0.0, 10.0), t_eval=[0.0, 10.0], rtol=1e-9, atol=1e-11,
+                     event_coef=np.repeat(coef[:, :1], 3, axis=0), event_offset=np.zeros((3, 1)))
+    res = kernel.solve(p)
+    assert np.all(np.diff(res.event_index[0]) >= 0)
+    assert np.bincount(res.event_index[0]).tolist()[0] == len(t[t < 10.0])
+
+
+def test_many_crossings_grow_the_storage():
+    model = euler_top()
+    xi = model.xi_from_coords(np.array([[1.0, 0.0, 40.0]]))
+    Bm = model.omega_coords(np.eye(model.k))
+    coef = Bm[:, 0].reshape(1, 1, -1).copy()
+    res = kernel.solve(make_problem(model, xi, mode="none", method="rkmk45", t_span=(0.0, 10.0),
+                                    t_eval=[0.0, 10.0], event_coef=coef, event_offset=np.zeros((1, 1))))
+    assert len(res.event_t[0]) > kernel.EVENT_CAP
+    assert np.all(np.diff(res.event_t[0]) > 0)
+
+
+@pytest.mark.parametrize("method", ["rkmk23", "rkmk45", "rkmk853"])
+def test_dense_output_order(method):
+    name, model, kind = SCENES[1]
+    rng = np.random.default_rng(3)
+    xi = rng.normal(size=(1, model.k))
+    g = rotations(rng, 1, 4).reshape(1, -1)
+    gamma = unit(rng, 1, 4)
+    plan = make_plan(get_tableau(METHODS[method].tableau))
+    hs = np.array([0.4, 0.2]) if method != "rkmk853" else np.array([0.8, 0.4])
+    errs = []
+    for h in hs:
+        te = 0.37 * h
+        p = make_problem(model, xi, G0=g, gamma=gamma, mode="g", method=method, h=h, t_span=(0.0, h),
+                         t_eval=[te], rtol=1e3, atol=1e3)
+        res = kernel.solve(p)
+        assert res.steps[0] == 1
+        ref = kernel.solve(make_problem(model, xi, G0=g, gamma=gamma, mode="g", method="rkmk853",
+                                        t_span=(0.0, te), t_eval=[te], rtol=1e-13, atol=1e-15))
+        errs.append(max(np.abs(res.xi[0] - ref.xi[0]).max(), np.abs(res.G[0] - ref.G[0]).max()))
+        Gt = res.G[0, 0].reshape(4, 4)
+        assert np.abs(Gt.T @ Gt - np.eye(4)).max() < 10 * EPS  # exact structure at interpolated times
+    slope = np.log(errs[0] / errs[1]) / np.log(hs[0] / hs[1])
+    assert slope > plan.dense_order + 1 - 0.6, (errs, slope)
+
+
+@pytest.mark.parametrize("scene", range(len(SCENES)), ids=[s[0] for s in SCENES])
+@pytest.mark.parametrize("chart", ["exp", "cayley"])
+def test_one_step_structure(scene, chart):
+    name, model, kind = SCENES[scene]
+    rng = np.random.default_rng(scene)
+    n = model.n
+    xi = rng.normal(size=(4, model.k)) * 2.0
+    gamma = unit(rng, 4, n) if model.has_gamma else None
+    p = make_problem(model, xi, G0=np.tile(np.eye(n).ravel(), (4, 1)), gamma=gamma, mode="g", chart=chart,
+                     kind=kind, method="rkmk4", h=0.5, t_span=(0.0, 0.5), t_eval=[0.5], reproject=False)
+    res = kernel.solve(p)
+    assert np.all(res.status == 0)
+    R = res.G[0].reshape(4, n, n)
+    assert np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(n)).max() <= 10 * EPS
+    if model.has_gamma:
+        p = make_problem(model, xi, G0=gamma, mode="gamma", chart=chart, kind=kind, method="rkmk4", h=0.5,
+                         t_span=(0.0, 0.5), t_eval=[0.5], reproject=False)
+        res = kernel.solve(p)
+        assert np.abs(np.linalg.norm(res.G[0], axis=1) - 1.0).max() <= 10 * EPS
+
+
+@pytest.mark.parametrize("kind", ["so3", "dense", "lowrank"])
+def test_structure_without_reprojection(kind):
+    rng = np.random.default_rng(4)
+    model = {"so3": SCENES[0][1], "dense": SCENES[1][1], "lowrank": SCENES[3][1]}[kind]
+    n = model.n
+    N = 10_000
+    xi = rng.normal(size=(1, model.k))
+    gamma = unit(rng, 1, n) if model.has_gamma else None
+    p = make_problem(model, xi, G0=np.eye(n).ravel(), gamma=gamma, mode="g", method="rkmk4", h=0.01,
+                     t_span=(0.0, N * 0.01), t_eval=[N * 0.01], reproject=False, kind=kind)
+    res = kernel.solve(p)
+    assert res.steps[0] == N
+    R = res.G[0, 0].reshape(n, n)
+    assert np.abs(R.T @ R - np.eye(n)).max() <= 2 * N * EPS
+    if model.has_gamma:
+        p = make_problem(model, xi, G0=gamma, mode="gamma", method="rkmk4", h=0.01, t_span=(0.0, N * 0.01),
+                         t_eval=[N * 0.01], reproject=False, kind=kind)
+        res = kernel.solve(p)
+        assert abs(np.linalg.norm(res.G[0, 0]) - 1.0) <= 2 * N * EPS
+
+
+def test_chart_domain():
+    model = euler_top()
+    so3 = SCENES[0][1]
+    xi = np.array([[0.0, 0.0]])
+    xi[0, 0] = 1.0
+    # fixed step with |h Omega| = 2 pi: fails with code 4, at the start
+    Om = so3.omega_matrix(xi)[0]
+    w = np.sqrt(0.5 * np.sum(Om ** 2))
+    h = 2 * np.pi / w
+    base = dict(G0=np.eye(3).ravel(), gamma=np.array([0.0, 0.0, 1.0]), mode="g", t_span=(0.0, 3 * h),
+                t_eval=[0.0, 3 * h])
+    res = kernel.solve(make_problem(so3, xi, method="rkmk4", h=h, **base))
+    assert res.status[0] == -1 and res.failure[0] == 4 and res.t_stop[0] == 0.0
+    # adaptive from the same first step: rejected, then it finishes
+    res = kernel.solve(make_problem(so3, xi, method="rkmk45", h=h, **base))
+    assert res.status[0] == 0 and res.rejected[0] >= 1
+    ref = kernel.solve(make_problem(so3, xi, method="rkmk45", **base))
+    np.testing.assert_allclose(res.G[-1], ref.G[-1], atol=1e-6)
+    del model
+
+
+def test_record_every_step_and_backward():
+    name, model, kind = SCENES[0]
+    rng = np.random.default_rng(8)
+    xi = rng.normal(size=(1, model.k))
+    gamma = unit(rng, 1, 3)
+    p = make_problem(model, xi, G0=np.eye(3).ravel(), gamma=gamma, mode="g", method="rkmk45",
+                     t_span=(0.0, -2.0), t_eval=None)
+    res = kernel.solve(p)
+    assert res.t[0] == 0.0 and res.t[-1] == -2.0 and np.all(np.diff(res.t) < 0)
+    assert res.xi.shape == (len(res.t), 1, model.k) and len(res.t) == res.steps[0] + 1
+    q = make_problem(model, xi, G0=np.eye(3).ravel(), gamma=gamma, mode="g", method="rkmk45",
+                     t_span=(0.0, -2.0), t_eval=res.t)
+    out = kernel.solve(q)
+    np.testing.assert_array_equal(out.xi, res.xi)
+    np.testing.assert_array_equal(out.steps, res.steps)
+
+
+@pytest.mark.parametrize("n", [8, 64])
+def test_lowrank_agrees_with_dense(n):
+    rng = np.random.default_rng(n)
+    model = fk_system(n, rng).model(gamma=False)
+    xi = rng.normal(size=(2, model.k)) / np.sqrt(n)
+    g = rotations(rng, 2, n).reshape(2, -1)
+    for chart in ("exp", "cayley"):
+        kw = dict(G0=g, mode="g", chart=chart, method="rkmk45", t_span=(0.0, 1.0), t_eval=[0.0, 0.5, 1.0],
+                  rtol=1e-9, atol=1e-11)
+        lo = kernel.solve(make_problem(model, xi, kind="lowrank", **kw))
+        de = kernel.solve(make_problem(model, xi, kind="dense", **kw))
+        assert np.all(lo.status == 0) and np.all(lo.steps == de.steps) and np.all(lo.nfev == de.nfev)
+        np.testing.assert_allclose(lo.xi, de.xi, atol=1e-12)
+        np.testing.assert_allclose(lo.G, de.G, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_lowrank_n256():
+    rng = np.random.default_rng(256)
+    model = fk_system(256, rng).model(gamma=False)
+    xi = rng.normal(size=(1, model.k)) / 16
+    res = kernel.solve(make_problem(model, xi, G0=np.eye(256).ravel(), mode="g", method="rkmk4", h=0.05,
+                                    t_span=(0.0, 1.0), t_eval=[1.0]))
+    R = res.G[0, 0].reshape(256, 256)
+    assert res.status[0] == 0 and np.abs(R.T @ R - np.eye(256)).max() < 1e-13
