@@ -183,10 +183,11 @@ def test_a_lost_process_pool_is_a_failed_status_not_a_crash(tmp_path):
 def test_sampler_is_reproducible_across_chunks_executors_and_equals_integrate(pool):
     system = _system()
     n = SAMPLER_BLOCK + 300  # more than one block, not a multiple of it
-    runs = [ensemble(system, None, T_SPAN, sampler=uniform_sampler, n=n, seed=7, chunk_size=cs, executor=ex,
+    span = (0.0, 0.1)  # short: many trajectories
+    runs = [ensemble(system, None, span, sampler=uniform_sampler, n=n, seed=7, chunk_size=cs, executor=ex,
                      reduce="final", **FIXED) for cs, ex in ((None, None), (100, None), (700, pool), (2000, pool))]
     init = draw(uniform_sampler, n, seed=7)
-    sol = ls.integrate(system, init["Omega0"], T_SPAN, Gamma0=init["Gamma0"], t_eval=list(T_SPAN), **FIXED)
+    sol = ls.integrate(system, init["Omega0"], span, Gamma0=init["Gamma0"], t_eval=list(span), **FIXED)
     for ens in runs:
         _assert_same(ens, sol, final_only=True)
         assert ens.stats["seed"] == 7
@@ -309,6 +310,26 @@ def test_progress_bar(capsys):
     assert "20/20" in capsys.readouterr().err
 
 
+def test_ls_ensemble_stays_callable_after_the_module_is_imported():
+    import liesuslov.ensemble  # the import system now sets ls.ensemble to the module
+
+    system, Omega0, Gamma0 = _initial((3,))
+    ens = ls.ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, **FIXED)
+    assert isinstance(ens, ls.Ensemble) and ens.success
+    assert liesuslov.ensemble.ensemble is ensemble and ls.open_ensemble is open_ensemble
+
+
+def test_import_liesuslov_stays_light():
+    import subprocess
+
+    code = ("import sys, liesuslov; print(sorted(m for m in ('dask', 'distributed', 'xarray', 'zarr', 'tqdm') "
+            "if m in sys.modules))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "[]"
+
+
 # ---------------------------------------------------------------------------- bad input
 def test_bad_input(tmp_path):
     system, Omega0, Gamma0 = _initial()
@@ -408,10 +429,11 @@ def test_dask_worker_killed_while_tasks_run(client, tmp_path):
 def test_dask_sampler_reproducible_across_worker_counts(client, pool):
     system = _system()
     kw = dict(sampler=uniform_sampler, n=2 * SAMPLER_BLOCK + 5, seed=3, reduce="final", **FIXED)
-    on_dask = ensemble(system, None, T_SPAN, chunk_size=300, executor=client, **kw)
+    span = (0.0, 0.1)
+    on_dask = ensemble(system, None, span, chunk_size=300, executor=client, **kw)
     with ProcessPoolExecutor(1) as one:
-        on_one = ensemble(system, None, T_SPAN, chunk_size=1024, executor=one, **kw)
-    here = ensemble(system, None, T_SPAN, **kw)
+        on_one = ensemble(system, None, span, chunk_size=1024, executor=one, **kw)
+    here = ensemble(system, None, span, **kw)
     for ens in (on_dask, on_one):
         _assert_same(ens, here.to_solution())
 
