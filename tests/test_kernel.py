@@ -194,34 +194,42 @@ def test_failure_is_isolated():
 
 
 def euler_top():
-    """A free symmetric top in so(3) (no constraint): omega_3 constant, omega_1 = cos(lam t) from (1, 0, w3)."""
+    """A free symmetric top in so(3) (no constraint): in the algebra's coordinates omega_0 (the symmetry axis)
+    is constant and omega_1 = cos(lam t) from (w3, 1, 0)."""
     system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 1.0, 2.0])), constraints="none")
     return system.model(gamma=False)
 
 
 def test_events_against_a_closed_form():
     model = euler_top()
-    w3 = 2.0
-    x = np.array([[1.0, 0.0, w3]])
+    x = np.array([[6.0, 1.0, 0.0]])
     xi = model.xi_from_coords(x)
     Bm = model.omega_coords(np.eye(model.k))  # omega = xi @ Bm
     coef = np.zeros((1, 2, model.k))
-    coef[0, 0] = Bm[:, 0]  # omega_1 = 0, both directions
-    coef[0, 1] = Bm[:, 0]  # omega_1 = 0 upward, terminal
-    p = make_problem(model, xi, mode="none", method="rkmk853", t_span=(0.0, 20.0), t_eval=np.linspace(0, 20, 5),
-                     rtol=1e-10, atol=1e-12, event_coef=coef, event_offset=np.zeros((1, 2)),
-                     event_terminal=[0, 1], event_direction=[0, 1])
+    coef[0, 0] = Bm[:, 1]  # omega_1 = 0, both directions
+    coef[0, 1] = Bm[:, 1]  # omega_1 = 0 upward, terminal when asked
+    kw = dict(mode="none", method="rkmk853", t_span=(0.0, 20.0), t_eval=np.linspace(0, 20, 5), rtol=1e-10,
+              atol=1e-12, event_coef=coef, event_offset=np.zeros((1, 2)), event_direction=[0, 1])
+    p = make_problem(model, xi, event_terminal=[0, 0], **kw)
     res = kernel.solve(p)
+    ref = numpy_solve(p)
+    for e in range(2):
+        np.testing.assert_allclose(res.event_t[e], ref.event_t[e], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(res.event_xi[e], ref.event_xi[e], rtol=0, atol=1e-12)
+    assert_same_run(res, ref)
     t = res.event_t[0]
-    # the frequency from the trajectory's own period: crossings are equally spaced at pi / lam
+    assert len(t) >= 6
+    # omega_1 = cos(lam t): roots at (pi/2 + n pi) / lam, equally spaced
     lam = np.pi / np.diff(t).mean()
     np.testing.assert_allclose(t, (np.pi / 2 + np.pi * np.arange(len(t))) / lam, rtol=0, atol=1e-9)
-    assert res.status[0] == 1 and res.t_stop[0] == res.event_t[1][0]
-    om = res.event_xi[0] @ Bm
-    np.testing.assert_allclose(om[:, 0], 0.0, atol=1e-10)
-    # the terminal upward crossing: omega_2 at it has the sign of an upward crossing of omega_1
-    assert len(res.event_t[1]) == 1 and t[0] < res.event_t[1][0] < t[2] + 1e-12
-    assert np.isnan(res.xi[-1, 0]).all() and not np.isnan(res.xi[0, 0]).any()
+    np.testing.assert_allclose(res.event_t[1], t[1::2], rtol=0, atol=1e-12)  # the upward ones
+    np.testing.assert_allclose((res.event_xi[0] @ Bm)[:, 1], 0.0, atol=1e-10)
+    # terminal: stops at the first upward crossing, later outputs NaN
+    res = kernel.solve(make_problem(model, xi, event_terminal=[0, 1], **kw))
+    assert res.status[0] == 1 and res.t_stop[0] == res.event_t[1][0] == pytest.approx(t[1], abs=1e-12)
+    assert len(res.event_t[0]) == 2 and len(res.event_t[1]) == 1
+    stopped = res.t > res.t_stop[0]
+    assert np.isnan(res.xi[stopped]).all() and not np.isnan(res.xi[~stopped]).any()
     # the same events over a batch, indices sorted
     p = make_problem(model, np.repeat(xi, 3, axis=0) * np.array([[1.0], [0.5], [2.0]]), mode="none",
                      method="rkmk45", t_span=(0.0, 10.0), t_eval=[0.0, 10.0], rtol=1e-9, atol=1e-11,
@@ -233,9 +241,9 @@ def test_events_against_a_closed_form():
 
 def test_many_crossings_grow_the_storage():
     model = euler_top()
-    xi = model.xi_from_coords(np.array([[1.0, 0.0, 40.0]]))
+    xi = model.xi_from_coords(np.array([[40.0, 1.0, 0.0]]))
     Bm = model.omega_coords(np.eye(model.k))
-    coef = Bm[:, 0].reshape(1, 1, -1).copy()
+    coef = Bm[:, 1].reshape(1, 1, -1).copy()
     res = kernel.solve(make_problem(model, xi, mode="none", method="rkmk45", t_span=(0.0, 10.0),
                                     t_eval=[0.0, 10.0], event_coef=coef, event_offset=np.zeros((1, 1))))
     assert len(res.event_t[0]) > kernel.EVENT_CAP
@@ -250,7 +258,7 @@ def test_dense_output_order(method):
     g = rotations(rng, 1, 4).reshape(1, -1)
     gamma = unit(rng, 1, 4)
     plan = make_plan(get_tableau(METHODS[method].tableau))
-    hs = np.array([0.4, 0.2]) if method != "rkmk853" else np.array([0.8, 0.4])
+    hs = {"rkmk23": np.array([0.1, 0.05]), "rkmk45": np.array([0.2, 0.1]), "rkmk853": np.array([0.4, 0.2])}[method]
     errs = []
     for h in hs:
         te = 0.37 * h
@@ -273,7 +281,9 @@ def test_one_step_structure(scene, chart):
     name, model, kind = SCENES[scene]
     rng = np.random.default_rng(scene)
     n = model.n
-    xi = rng.normal(size=(4, model.k)) * 2.0
+    xi = rng.normal(size=(4, model.k))
+    Om = model.omega_matrix(xi)
+    xi *= 4.0 / np.sqrt(0.5 * np.sum(Om ** 2, axis=(1, 2)))[:, None]  # |h Omega| = 2 rad
     gamma = unit(rng, 4, n) if model.has_gamma else None
     p = make_problem(model, xi, G0=np.tile(np.eye(n).ravel(), (4, 1)), gamma=gamma, mode="g", chart=chart,
                      kind=kind, method="rkmk4", h=0.5, t_span=(0.0, 0.5), t_eval=[0.5], reproject=False)

@@ -235,8 +235,8 @@ def solve(problem: Problem) -> RawResult:
         sel = sel.astype(np.int64)
         ev_lists[0].append(ev_t[idx, e, sel])
         ev_lists[1].append(idx)
-        ev_lists[2].append(ev_xi[idx, e, sel].reshape(-1, k))
-        ev_lists[3].append(ev_G[idx, e, sel].reshape(-1, q))
+        ev_lists[2].append(ev_xi[idx, e, sel].reshape(idx.size, k))
+        ev_lists[3].append(ev_G[idx, e, sel].reshape(idx.size, q))
     return RawResult(t=t_out, xi=xi_out, G=G_out, status=status, t_stop=t_stop, failure=failure, nfev=nfev,
                      steps=steps, rejected=rejected, event_t=ev_lists[0], event_index=ev_lists[1],
                      event_xi=ev_lists[2], event_G=ev_lists[3], backend="numba")
@@ -1549,7 +1549,7 @@ def _solve_one(bi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap, xi_
         else:
             f0_ok = False
         at_start = False
-        if reproj and nsteps % renorm == 0:
+        if reproj and group and nsteps % renorm == 0:
             f0_ok = False  # the state moved: stage 0 is evaluated again
             if mode == 2:
                 Gm = G.reshape((m, m))
