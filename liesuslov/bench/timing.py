@@ -45,15 +45,24 @@ def timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, float, int]:
 def affordable_steps(run: Callable[[int], Any], wanted: int, budget_s: float, minimum: int = 2) -> int:
     """At most ``wanted`` steps, fewer if one call ``run(steps)`` would take longer than about ``budget_s``.
 
-    Probes ``run(minimum)`` twice (the first call may compile or fill caches). The probe's call overhead
-    counts as step cost, so the estimate errs towards fewer steps. Keeps a slow path (numpy stepping each
-    trajectory of a large batch in Python) from turning one measurement into minutes.
+    Probes ``run(k)`` for k = ``minimum``, 8 ``minimum``, … until a call takes a tenth of the budget (the
+    first call may compile or fill caches and is not counted), then extrapolates: the fixed cost of a
+    call is then small against its steps, so a fast path is not cut short by its call overhead. Keeps a
+    slow path (numpy stepping each trajectory of a large batch in Python) from turning one measurement
+    into minutes.
     """
-    run(minimum)
-    start = time.perf_counter()
-    run(minimum)
-    per_step = (time.perf_counter() - start) / minimum
-    return int(min(wanted, max(minimum, budget_s / max(per_step, 1e-12))))
+    k = min(minimum, wanted)
+    run(k)
+    while True:
+        start = time.perf_counter()
+        run(k)
+        dt = time.perf_counter() - start
+        if k >= wanted:
+            return wanted
+        if dt >= 0.1 * budget_s:
+            break
+        k = min(wanted, 8 * k)
+    return int(min(wanted, max(minimum, budget_s * k / max(dt, 1e-12))))
 
 
 #: Sizes measured in a child process with memory and time limits (a failure there is recorded, not fatal).
