@@ -74,7 +74,8 @@ def summary_sections(report: BenchReport, config: BenchConfig, image_dir: str | 
         ["CPU", m["cpu"]], ["cores", m["cores"]], ["platform", m["platform"]], ["Python", m["python"]],
         ["numpy", m["numpy"]], ["scipy", m["scipy"]], ["numba", m["numba"]], ["liesuslov", m["liesuslov"]],
         ["commit", m["commit"]], ["date", m["date"]],
-        ["mode", f"{config.preset}, {report.elapsed:.0f} s in all"],
+        ["mode", f"{config.preset}, backend asked: {config.backend or 'the default (auto)'}, "
+                 f"{report.elapsed:.0f} s in all"],
         ["backends seen", ", ".join(sorted({str(r.get('backend')) for r in report.rows
                                            if r["library"] == "liesuslov" and r.get("backend")})) or "—"]]))
     if report.target_summary:
