@@ -1,7 +1,7 @@
 """Ensemble benchmark: trajectories per second against workers, and the peak memory of a 10^6 run.
 
 Run: ``.venv/bin/python benchmarks/ensemble_throughput.py [--n 1000000] [--executor process|dask]``;
-it prints the markdown tables of ``docs/ensembles.md`` (see :func:`liesuslov.ensemble.benchmark`).
+it prints the markdown tables of ``docs/ensembles.md`` (see :func:`liesuslov.ensembles.benchmark`).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import argparse
 import os
 import platform
 
-from liesuslov.ensemble import benchmark
+from liesuslov.ensembles import benchmark
 
 
 def main() -> None:

@@ -58,9 +58,9 @@ __version__ = "0.1.0"
 # The closed forms (scipy.special), geomstats interop, research tools and ensembles load on first use:
 # ``import liesuslov`` stays light. A value None means the name is a submodule.
 _LAZY = {"analytic": None, "interop": None, "poincare_section": ".research", "reconstruction_phase": ".research",
-         "lyapunov_exponent": ".research", "ReconstructionPhase": ".research", "ensemble": ".ensemble",
-         "open_ensemble": ".ensemble",
-         "Ensemble": ".ensemble", "EventRecord": ".integrators"}
+         "lyapunov_exponent": ".research", "ReconstructionPhase": ".research", "ensemble": ".ensembles",
+         "open_ensemble": ".ensembles",
+         "Ensemble": ".ensembles", "EventRecord": ".integrators"}
 
 
 def __getattr__(name: str):

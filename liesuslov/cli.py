@@ -122,7 +122,7 @@ def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
     ens = sub.add_parser("ensemble", help="integrate N perturbed copies of a scene's initial state (ls.ensemble)",
                          description="Integrate N initial states drawn around the scene's (Omega0 + scale * z "
                                      "along the constraint subspace, z standard normal; Gamma0 perturbed by "
-                                     "scale * w and renormalised; g0 kept: liesuslov.ensemble.Perturbation), "
+                                     "scale * w and renormalised; g0 kept: liesuslov.ensembles.Perturbation), "
                                      "reproducibly from --seed whatever --workers, on W worker processes, "
                                      "streaming the two ends of t_span (or only the final state) to a store "
                                      "folder read back by ls.open_ensemble(DIR). Exit status 1 if a trajectory "
@@ -596,7 +596,7 @@ def _potential_table(p) -> Any:
 
 # ====================================================================== ensemble
 def _cmd_ensemble(args) -> int:
-    from .ensemble import Perturbation, ensemble
+    from .ensembles import Perturbation, ensemble
 
     for name, value, low in (("--n", args.n, 1), ("--workers", args.workers, 0)):
         if value < low:

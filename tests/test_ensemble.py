@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import liesuslov as ls
-from liesuslov.ensemble import SAMPLER_BLOCK, Perturbation, draw, ensemble, open_ensemble
+from liesuslov.ensembles import SAMPLER_BLOCK, Perturbation, draw, ensemble, open_ensemble
 
 T_SPAN = (0.0, 1.5)
 FIXED = {"method": "rkmk4", "h": 0.01}
@@ -311,12 +311,12 @@ def test_progress_bar(capsys):
 
 
 def test_ls_ensemble_stays_callable_after_the_module_is_imported():
-    import liesuslov.ensemble  # the import system now sets ls.ensemble to the module
+    import liesuslov.ensembles  # the module is ensembles: ls.ensemble stays the function
 
     system, Omega0, Gamma0 = _initial((3,))
     ens = ls.ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, **FIXED)
     assert isinstance(ens, ls.Ensemble) and ens.success
-    assert liesuslov.ensemble.ensemble is ensemble and ls.open_ensemble is open_ensemble
+    assert liesuslov.ensembles.ensemble is ensemble and ls.open_ensemble is open_ensemble
 
 
 def test_import_liesuslov_stays_light():

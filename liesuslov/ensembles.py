@@ -30,10 +30,8 @@ import json
 import math
 import os
 import pickle
-import sys
 import tempfile
 import time
-import types
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -1127,22 +1125,3 @@ def benchmark(n: int = 1_000_000, workers: tuple[int, ...] = (1, 2), *, n_throug
                      # the largest worker process that has ended (the pools are shut down by now)
                      "worker_maxrss_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024}
     return out
-
-
-# ====================================================================== ls.ensemble is callable either way
-class _CallableModule(types.ModuleType):
-    """This module, callable as :func:`ensemble`.
-
-    ``liesuslov`` exports the function ``ensemble`` lazily from this module, ``liesuslov.ensemble``; once
-    the module is imported, Python's import system sets the package attribute ``liesuslov.ensemble`` to
-    the module, which then hides the function. Making the module callable keeps ``ls.ensemble(...)``
-    working whichever of the two the attribute holds (``from liesuslov.ensemble import ensemble`` is the
-    function itself).
-    """
-
-    def __call__(self, *args, **kwargs) -> Ensemble:
-        return ensemble(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallableModule
-__signature__ = inspect.signature(ensemble)
