@@ -380,10 +380,8 @@ class FloorScene:
 
     Attributes
     ----------
-    key, title : str
-    n : int
-        SO(n).
-    system : SuslovSystem
+    key, title, n, system
+        As in :class:`BenchScene`.
     Omega0 : ndarray, shape (n, n)
     Gamma0 : ndarray, shape (n,), or None
     x0 : ndarray
