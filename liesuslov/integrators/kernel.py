@@ -855,22 +855,18 @@ def _alg_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ
     if mode == 1:
         _alg_act(kind, chart, skew, Th, -1.0, G, out, Wf, vbf, Q, nc, r, bufs)
         return
-    if kind == 1:
-        W, _ = _scratch(Wf, vbf, 3)
+    if kind == 1:  # g R with R = c I + a hat(w) + b w w^T, by scalars (no reshape, no scratch)
         w0, w1, w2 = Th[0], Th[1], Th[2]
         c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
-        R = W[10]
         bw0, bw1, bw2 = b * w0, b * w1, b * w2
-        R[0, 0] = c + bw0 * w0
-        R[0, 1] = bw0 * w1 - a * w2
-        R[0, 2] = bw0 * w2 + a * w1
-        R[1, 0] = bw0 * w1 + a * w2
-        R[1, 1] = c + bw1 * w1
-        R[1, 2] = bw1 * w2 - a * w0
-        R[2, 0] = bw0 * w2 - a * w1
-        R[2, 1] = bw1 * w2 + a * w0
-        R[2, 2] = c + bw2 * w2
-        _mm(G.reshape((3, 3)), R, out.reshape((3, 3)))
+        r00, r01, r02 = c + bw0 * w0, bw0 * w1 - a * w2, bw0 * w2 + a * w1
+        r10, r11, r12 = bw0 * w1 + a * w2, c + bw1 * w1, bw1 * w2 - a * w0
+        r20, r21, r22 = bw0 * w2 - a * w1, bw1 * w2 + a * w0, c + bw2 * w2
+        for i in range(3):
+            g0, g1, g2 = G[3 * i], G[3 * i + 1], G[3 * i + 2]
+            out[3 * i] = g0 * r00 + g1 * r10 + g2 * r20
+            out[3 * i + 1] = g0 * r01 + g1 * r11 + g2 * r21
+            out[3 * i + 2] = g0 * r02 + g1 * r12 + g2 * r22
         return
     if kind == 2:
         n = int(math.sqrt(G.shape[0]) + 0.5)
