@@ -464,8 +464,10 @@ def test_klebsh_tisserand_closed_form_either_side_of_the_tori_condition(margin):
     np.testing.assert_allclose(km.margin, margin, rtol=1e-9)
     ts = np.linspace(0.0, 16.0, 9)
     u, G = km.state(ts)
-    sol = ls.integrate(case.system, fk_omega(u0), (0.0, 16.0), Gamma0=G0, method="rkmk853", rtol=1e-13,
-                       atol=1e-14, t_eval=np.linspace(0.0, 16.0, 801))
+    # rtol 1e-14: the state-space norm scales Gamma_n ~ sqrt(delta) by its own size near the passage, and the
+    # passage amplifies a local error by ~delta^-1/2 (at rtol 1e-13 the error reaches 4e-9 for delta = 1e-6)
+    sol = ls.integrate(case.system, fk_omega(u0), (0.0, 16.0), Gamma0=G0, method="rkmk853", rtol=1e-14,
+                       atol=1e-15, t_eval=np.linspace(0.0, 16.0, 801))
     assert sol.success
     gn = sol.Gamma[:, -1]
     if margin > 0:
@@ -613,9 +615,11 @@ def test_constant_velocity_steps_near_pi(n, chart, backend):
     """Steps turning the body by ~pi (|h Omega|_2 = pi - 1e-6 and pi + 1e-3), every kernel (so(3), so(4),
     dense, low rank) and both backends.
 
-    exp: the stages commute with Omega, so RKMK is exact whatever h (dexp^-1 is singular only at 2 pi):
-    g = exp(t Omega) to rounding. Cayley: the chart coordinate of the exact increment, 2 tan(t|Omega|/2),
-    is infinite at a half turn, so the method is wrong there (error O(1)) — but finite and orthogonal.
+    exp: the stages commute with Omega, so RKMK is exact below a half turn: g = exp(t Omega) to rounding;
+    a step of more than a half turn is beyond the exponential chart's domain (the rule both backends
+    enforce), so that fixed-step run fails at t = 0 naming the chart. Cayley: the chart coordinate of the
+    exact increment, 2 tan(t|Omega|/2), is infinite at a half turn, so the method is wrong there (error
+    O(1)) — but finite and orthogonal.
     """
     system, u = free_diagonal(n)
     e_n = np.eye(n)[-1]
@@ -623,6 +627,9 @@ def test_constant_velocity_steps_near_pi(n, chart, backend):
         ts = h * np.arange(9)
         sol = ls.integrate(system, fk_omega(u), (0.0, ts[-1]), reconstruct=True, method="rkmk4", chart=chart,
                            h=h, t_eval=ts, backend=backend)
+        if chart == "exp" and h > np.pi:
+            assert sol.status == -1 and "domain" in sol.message and sol.stats["t_stop"] == 0.0
+            continue
         assert sol.success, sol.message
         assert_structure(system, sol, orth=1e-13)
         exact = groups.exp_rank2(ts[:, None] * np.append(u, 0.0), e_n)
@@ -868,6 +875,9 @@ def test_overflow_from_a_too_large_fixed_step(n, chart, reconstruct, backend):
         sol = quiet_integrate(case.system, Omega0, (0.0, 1e4), method=method, h=h, chart=chart,
                               reconstruct=reconstruct, backend=backend)
         t_named = assert_failed_loudly(sol)
+        if "domain" in sol.message:  # the exponential refuses the first step at once (|h Omega| >> pi)
+            assert chart == "exp" and t_named == 0.0
+            continue
         assert "non-finite" in sol.message
         assert t_named == pytest.approx(sol.t[-1] + h) and sol.t[-1] < 1e3
 

@@ -48,7 +48,6 @@ METHODS: dict[str, Method] = {
 }
 
 BACKENDS = ("auto", "numpy", "numba")
-_KERNEL_READY = False
 
 
 def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool = False,
@@ -305,8 +304,6 @@ def _choose_solver(P: Problem, backend: str):
 
     if backend == "numpy":
         return solve_numpy, "numpy", "backend='numpy' was asked for"
-    if backend == "auto" and not _KERNEL_READY:
-        return solve_numpy, "numpy", "the compiled kernel is being rebuilt"
     try:
         from . import kernel
     except ImportError as exc:  # numba is not installed
@@ -385,7 +382,7 @@ def _message(raw: RawResult) -> str:
         head = "" if raw.status.size == 1 else (f"{failed.size} of {raw.status.size} trajectories failed; "
                                                f"the first (index {b}): ")
         what, _, hint = what.partition(" (")
-        return f"{head}{what} at t = {raw.t_stop[b]:.17g}" + (f" ({hint}." if hint else ".")
+        return f"{head}{what} at t = {raw.t_stop[b]:.17g}" + (f" ({hint}" if hint else "")
     if stopped:
         return (f"A terminal event stopped {stopped} of {raw.status.size} trajectories; the others reached the end."
                 if raw.status.size > 1 else f"A terminal event stopped the trajectory at t = {raw.t_stop[0]:.17g}.")
