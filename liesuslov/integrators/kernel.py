@@ -886,8 +886,13 @@ def _alg_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ
     _mat_phi(chart, skew, Mb, F, W)
     for i in range(ra):
         F[i, i] -= 1.0
-    Gm = G.reshape((n, n))
-    Om = out.reshape((n, n))
+    _g_low_rank(G.reshape((n, n)), Q, F, ra, PQ, PQ2, out.reshape((n, n)), True)
+
+
+@_jit
+def _g_low_rank(Gm, Q, F, ra, PQ, PQ2, Om, add_g):
+    """``Om = (g if add_g else 0) + g Q F Q^T`` for g (n, n), Q (n, >= ra), F (ra, ra): O(n^2 ra)."""
+    n = Q.shape[0]
     P1 = PQ[:, :ra]
     P2 = PQ2[:, :ra]
     for i in range(n):
@@ -904,7 +909,7 @@ def _alg_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ
                 acc += P1[i, p] * F[p, j]
             P2[i, j] = acc
         for j in range(n):
-            acc = Gm[i, j]
+            acc = Gm[i, j] if add_g else 0.0
             for p in range(ra):
                 acc += P2[i, p] * Q[j, p]
             Om[i, j] = acc
@@ -962,28 +967,7 @@ def _alg_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
                 acc += Q[p, i] * z[i]
             out[p] = acc
         return
-    Gm = G1.reshape((n, n))
-    Om = out.reshape((n, n))
-    P1 = PQ[:, :ra]
-    P2 = PQ2[:, :ra]
-    for i in range(n):
-        for j in range(ra):
-            P1[i, j] = 0.0
-        for p in range(n):
-            g = Gm[i, p]
-            if g != 0.0:
-                for j in range(ra):
-                    P1[i, j] += g * Q[p, j]
-        for j in range(ra):
-            acc = 0.0
-            for p in range(ra):
-                acc += P1[i, p] * Eb[p, j]
-            P2[i, j] = acc
-        for j in range(n):
-            acc = 0.0
-            for p in range(ra):
-                acc += P2[i, p] * Q[j, p]
-            Om[i, j] = acc
+    _g_low_rank(G1.reshape((n, n)), Q, Eb, ra, PQ, PQ2, out.reshape((n, n)), False)
 
 
 # ====================================================================================== one trajectory
