@@ -124,3 +124,31 @@ def unit_vectors(x: np.ndarray, name: str, *, tol: float = 1e-8) -> np.ndarray:
                          f"[{nrm.min():.6g}, {nrm.max():.6g}]: pass {name} / |{name}|")
     return x / nrm[..., None]
 
+
+def check_t_span(t_span) -> tuple[float, float]:
+    """``(t0, t1)`` from a pair of finite, different numbers (ValueError naming ``t_span`` otherwise)."""
+    try:
+        t0, t1 = (float(v) for v in t_span)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"t_span must be a pair of numbers (t0, t1), got {t_span!r}") from exc
+    if not (np.isfinite(t0) and np.isfinite(t1)):
+        raise ValueError(f"t_span must be finite, got {t_span!r}")
+    if t0 == t1:
+        raise ValueError(f"t_span must have t0 != t1, got {t_span!r}")
+    return t0, t1
+
+
+def check_t_eval(t_eval, t0: float, t1: float) -> np.ndarray:
+    """Output times: a non-empty 1-D array inside ``(t0, t1)``, strictly monotone in the direction of integration."""
+    if t_eval is None:
+        return None
+    te = as_float_array(t_eval, "t_eval")
+    if te.ndim != 1 or te.size == 0:
+        raise ValueError(f"t_eval must be a non-empty 1-D array, got shape {te.shape}")
+    lo, hi = min(t0, t1), max(t0, t1)
+    if te.min() < lo or te.max() > hi:
+        raise ValueError(f"t_eval must lie within t_span = ({t0}, {t1})")
+    d = np.diff(te) * (1.0 if t1 > t0 else -1.0)
+    if np.any(d <= 0):
+        raise ValueError("t_eval must be strictly increasing (decreasing for backward integration)")
+    return np.ascontiguousarray(te)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_float_array, check_positive, check_rotations, unit_vectors
+from .._validation import as_float_array, check_positive, check_rotations, check_t_eval, check_t_span, unit_vectors
 from ..algebra.elements import body_vector, omega_coordinates
 from ..mechanics.protocol import ModelProtocol
 from .charts import CHARTS
@@ -142,7 +142,7 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     if isinstance(max_steps, (bool, np.bool_)) or not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
         raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
     meth = METHODS[method]
-    t0, t1 = _check_t_span(t_span)
+    t0, t1 = check_t_span(t_span)
     if meth.adaptive:
         rtol = check_positive(rtol, "rtol")
         atol = check_positive(atol, "atol")
@@ -156,7 +156,7 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
             raise ValueError(f"h (the step size) is required by the fixed-step method {method!r}; "
                              "pass h=..., or use an adaptive method such as 'rkmk45'")
         step0 = check_positive(h, "h")
-    te = _check_t_eval(t_eval, t0, t1)
+    te = check_t_eval(t_eval, t0, t1)
     model, x0, G0, g_init, batch_shape = _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form)
     B = int(np.prod(batch_shape))
     plan = make_plan(get_tableau(meth.tableau))
@@ -448,28 +448,3 @@ def initial_velocity(system, Omega0, Gamma0=None):
 
 
 # ---------------------------------------------------------------------------------------------------------
-def _check_t_span(t_span) -> tuple[float, float]:
-    try:
-        t0, t1 = (float(v) for v in t_span)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"t_span must be a pair of numbers (t0, t1), got {t_span!r}") from exc
-    if not (np.isfinite(t0) and np.isfinite(t1)):
-        raise ValueError(f"t_span must be finite, got {t_span!r}")
-    if t0 == t1:
-        raise ValueError(f"t_span must have t0 != t1, got {t_span!r}")
-    return t0, t1
-
-
-def _check_t_eval(t_eval, t0: float, t1: float):
-    if t_eval is None:
-        return None
-    te = as_float_array(t_eval, "t_eval")
-    if te.ndim != 1 or te.size == 0:
-        raise ValueError(f"t_eval must be a non-empty 1-D array, got shape {te.shape}")
-    lo, hi = min(t0, t1), max(t0, t1)
-    if te.min() < lo or te.max() > hi:
-        raise ValueError(f"t_eval must lie within t_span = ({t0}, {t1})")
-    d = np.diff(te) * (1.0 if t1 > t0 else -1.0)
-    if np.any(d <= 0):
-        raise ValueError("t_eval must be strictly increasing (decreasing for backward integration)")
-    return np.ascontiguousarray(te)

@@ -1,0 +1,22 @@
+"""The ensemble constants: sampler blocks, reductions, the store format."""
+
+from __future__ import annotations
+
+#: Trajectories per random block: block ``j`` (trajectories ``[j B, (j + 1) B)``) is drawn by
+#: ``sampler(numpy.random.default_rng(SeedSequence(seed).spawn(j + 1)[j]), B)``, whatever the chunking.
+SAMPLER_BLOCK = 1024
+#: Names accepted by ``reduce=`` (besides None and a module-level callable ``Solution -> Solution``).
+REDUCTIONS = ("final",)
+FORMAT = "liesuslov-ensemble/1"
+MANIFEST = "manifest.json"
+_ARRAYS = ("xi", "omega", "Gamma", "g")
+_INIT_KEYS = ("Omega0", "Gamma0", "g0")
+_SUMMED = ("nfev", "steps", "rejected")
+_STAT = "stats__"  # shard key prefix of a per-trajectory statistic (e.g. stats__trajectory_steps)
+_CORE = {"Omega0": None, "Gamma0": 1, "g0": 2}  # trailing (non-batch) axes; Omega0's is 1 or 2
+# Exceptions a task raises on bad input: deterministic, so they are raised here, never retried.
+_USER_ERRORS = (ValueError, TypeError)
+
+
+def _shard_name(i: int) -> str:
+    return f"chunk-{i:06d}.npz"

@@ -1,0 +1,203 @@
+"""What an ensemble returns: :class:`Ensemble`, arrays as a Solution's, in memory or read lazily from a store."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from .constants import (
+    _ARRAYS,
+    _STAT,
+    _shard_name,
+)
+
+
+# ====================================================================== the result
+class Ensemble:
+    """The result of :func:`ensemble` (or :func:`open_ensemble`): the arrays of a Solution.
+
+    In memory, or backed by a store directory: then every array is assembled from the shards on each
+    access (keep a reference, ``omega = ens.omega``, rather than reading ``ens.omega`` in a loop), and
+    :meth:`chunks` walks the results with bounded memory. Pickles (a store-backed one as its path).
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+    xi : ndarray, shape (N, ..., k)
+    omega : ndarray, shape (N, ..., d)
+    Omega : ndarray, shape (N, ..., n, n), or None off so(n)
+    Gamma : ndarray, shape (N, ..., n), or None
+    g : ndarray, shape (N, ..., m, m), or None
+    status : ndarray of int, shape (...)
+        0 reached the end, 1 stopped by a terminal event, -1 failed (a failed or missing chunk too).
+    success : bool
+        Every status >= 0.
+    stats : dict
+        ``nfev``, ``steps``, ``rejected`` summed over chunks; ``chunks``, ``chunk_size``,
+        ``failed_chunks`` (list of ``{"chunk", "start", "stop", "error"}``), ``retries``,
+        ``wall_time``, ``executor``, ``seed`` (the entropy of a sampler run), and the first chunk's
+        ``method``, ``chart``, ``form``, ``backend``; statistics integrate reports per trajectory
+        (arrays of the batch shape, e.g. ``trajectory_steps``) assembled over the whole batch (0 or
+        NaN for a failed or missing chunk).
+    batch_shape : tuple of int
+    complete : bool
+        False for a store some of whose chunks are missing (their status is -1, their values NaN).
+    store : Path or None
+    """
+
+    def __init__(self, *, t, batch_shape, bounds, tails, stats, n=None, algebra_name="", message="",
+                 arrays=None, status=None, store=None, present=None, traj_stats=None):
+        self._t = np.asarray(t, dtype=float)
+        self.batch_shape = tuple(int(b) for b in batch_shape)
+        self._bounds = [tuple(map(int, b)) for b in bounds]
+        self._tails = {k: tuple(v) for k, v in tails.items()}
+        self._stats = stats
+        # per-trajectory statistics: {name: (B,) array} in memory, {name: dtype string} for a store
+        self._traj_stats = traj_stats or {}
+        self.n = n
+        self.algebra_name = algebra_name
+        self.message = message
+        self._arrays = arrays
+        self._status = status
+        self.store = None if store is None else Path(store)
+        self._present = present
+
+    # ------------------------------------------------------------------ arrays
+    @property
+    def t(self) -> np.ndarray:
+        return self._t
+
+    @property
+    def xi(self) -> np.ndarray:
+        return self._get("xi")
+
+    @property
+    def omega(self) -> np.ndarray:
+        return self._get("omega")
+
+    @property
+    def Gamma(self) -> np.ndarray | None:
+        return self._get("Gamma")
+
+    @property
+    def g(self) -> np.ndarray | None:
+        return self._get("g")
+
+    @property
+    def Omega(self) -> np.ndarray | None:
+        """Omega as skew matrices (N, ..., n, n) on so(n); None on other algebras."""
+        if not self.algebra_name.startswith("so(") or self.n is None:
+            return None
+        from ..algebra import so
+
+        return so(self.n).hat(self.omega)
+
+    @property
+    def stats(self) -> dict:
+        out = dict(self._stats)
+        for name, v in self._traj_stats.items():
+            out[name] = (v if isinstance(v, np.ndarray) else self._assemble_stat(name, v)).reshape(self.batch_shape)
+        return out
+
+    def _assemble_stat(self, name: str, dtype: str) -> np.ndarray:
+        dt = np.dtype(dtype)
+        out = np.full(self._B, np.nan if dt.kind == "f" else 0, dtype=dt)
+        for i, (a, b) in enumerate(self._bounds):
+            if self._has(i):
+                with np.load(self._shard(i), allow_pickle=False) as z:
+                    if _STAT + name in z.files:
+                        out[a:b] = z[_STAT + name]
+        return out
+
+    @property
+    def status(self) -> np.ndarray:
+        if self._status is not None:
+            return self._status
+        st = np.full(self._B, -1, dtype=np.int64)
+        for i, (a, b) in enumerate(self._bounds):
+            if self._has(i):
+                with np.load(self._shard(i), allow_pickle=False) as z:
+                    st[a:b] = z["status"]
+        return st.reshape(self.batch_shape)
+
+    @property
+    def success(self) -> bool:
+        """True iff every trajectory's status is >= 0 (reached the end or stopped by a terminal event)."""
+        return bool(np.all(self.status >= 0))
+
+    @property
+    def complete(self) -> bool:
+        return self._present is None or all(self._present)
+
+    @property
+    def _B(self) -> int:
+        return math.prod(self.batch_shape)
+
+    def _has(self, i: int) -> bool:
+        return self._present is None or self._present[i]
+
+    def _shard(self, i: int) -> Path:
+        return self.store / _shard_name(i)
+
+    def _get(self, name: str) -> np.ndarray | None:
+        if name not in self._tails:
+            return None
+        if self._arrays is not None:
+            return self._arrays[name]
+        out = np.full((self._t.size, self._B) + self._tails[name], np.nan)
+        for i, (a, b) in enumerate(self._bounds):
+            if self._has(i):
+                with np.load(self._shard(i), allow_pickle=False) as z:
+                    if name in z.files:
+                        out[:, a:b] = z[name]
+        return out.reshape((self._t.size,) + self.batch_shape + self._tails[name])
+
+    def chunks(self) -> Iterator[tuple[int, int, dict[str, np.ndarray]]]:
+        """Yield ``(start, stop, arrays)`` per chunk: flat trajectory indices (C order) and the chunk's
+        arrays (``xi``, ``omega``, ``Gamma``, ``g`` with shape (N, stop - start, ...), ``status``);
+        missing chunks are skipped. Memory stays at one chunk."""
+        for i, (a, b) in enumerate(self._bounds):
+            if self._arrays is not None:
+                flat = {k: v.reshape((v.shape[0], self._B) + self._tails[k])[:, a:b] for k, v in self._arrays.items()}
+                flat["status"] = self.status.reshape(-1)[a:b]
+                yield a, b, flat
+            elif self._has(i):
+                with np.load(self._shard(i), allow_pickle=False) as z:
+                    yield a, b, {k: z[k] for k in (*_ARRAYS, "status") if k in z.files}
+
+    def to_solution(self):
+        """All of it as a :class:`~liesuslov.Solution` (in memory)."""
+        from ..integrators import Solution
+
+        return Solution(t=self.t, xi=self.xi, omega=self.omega, Gamma=self.Gamma, g=self.g, stats=self.stats,
+                        status=self.status, message=self.message, n=self.n, algebra_name=self.algebra_name)
+
+    def to_xarray(self):
+        """An ``xarray.Dataset`` (dims ``time``, ``batch_0``, ..., components); needs ``liesuslov[xarray]``."""
+        from ..xarray_io import solution_to_xarray
+
+        return solution_to_xarray(self)
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        if self.store is not None:  # a store-backed ensemble travels as its path: reread the manifest
+            state = {"store": self.store}
+        return state
+
+    def __setstate__(self, state):
+        if set(state) == {"store"}:
+            from .store import open_ensemble  # the store builds Ensembles: imported here, not at the top
+
+            self.__dict__.update(open_ensemble(state["store"]).__dict__)
+        else:
+            self.__dict__.update(state)
+
+    def __repr__(self) -> str:
+        where = f", store={str(self.store)!r}" if self.store is not None else ""
+        status = self.status
+        ok = int(np.count_nonzero(status >= 0))
+        return (f"Ensemble(batch_shape={self.batch_shape}, t: {self.t.shape}, success={ok}/{status.size}"
+                f"{'' if self.complete else ', incomplete'}{where})")

@@ -1,0 +1,420 @@
+"""The front door :func:`ensemble`: split, submit, retry lost chunks, collect, merge."""
+
+from __future__ import annotations
+
+import inspect
+import math
+import os
+import pickle
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._validation import check_t_eval, check_t_span
+from .checks import _nonneg_int, _positive_int
+from .constants import (
+    _ARRAYS,
+    _CORE,
+    _STAT,
+    _SUMMED,
+    _USER_ERRORS,
+    FORMAT,
+    MANIFEST,
+    REDUCTIONS,
+    SAMPLER_BLOCK,
+)
+from .executors import _n_workers, _submit, _wait_first
+from .result import Ensemble
+from .sampling import _seed_parts
+from .store import _write_manifest, _write_shard, open_ensemble
+from .tasks import _Task
+
+
+# ====================================================================== the front door
+def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=None, chunk_size: int | None = None,
+             executor=None, store=None, sampler: Callable | None = None, n: int | None = None, seed=None,
+             reduce: str | Callable | None = None, progress: bool = False, retries: int = 2,
+             max_in_flight: int | None = None, overwrite: bool = False, **options) -> Ensemble:
+    """Integrate a batch of initial data chunk by chunk on an executor: the numbers of one :func:`integrate`.
+
+    Parameters
+    ----------
+    system : SuslovSystem or Model
+        Must pickle when ``executor`` is not None (systems built from module-level callables do).
+    Omega0 : array_like, shape (..., n, n) or (..., d), optional
+        Initial data as for :func:`~liesuslov.integrate`; the batch axes of ``Omega0``, ``Gamma0`` and
+        ``g0`` broadcast together. None with a ``sampler``.
+    t_span : (t0, t1)
+    Gamma0 : array_like, shape (..., n), optional
+    g0 : array_like, shape (..., m, m), optional
+        Only with ``reconstruct=True`` (an option of integrate).
+    t_eval : array_like, shape (N,), optional
+        Output times; default the two ends of ``t_span``.
+    chunk_size : int, optional
+        Trajectories per task (default: a quarter of the batch per worker, at most 4096; the whole
+        batch in one chunk when ``executor`` and ``store`` are None). It does not change the numbers.
+    executor : None, concurrent.futures.Executor or dask.distributed.Client
+        None runs the chunks here, one after the other.
+    store : str or PathLike, optional
+        A directory the results stream to (created; an existing store is refused unless
+        ``overwrite=True``). The returned Ensemble then reads from it lazily.
+    sampler : callable, optional
+        A module-level callable (or :class:`Perturbation`) ``sampler(rng, size) -> dict`` with
+        ``"Omega0"`` (size, ...) and optionally ``"Gamma0"``, ``"g0"``, called on the workers: block ``j``
+        of :data:`SAMPLER_BLOCK` trajectories is drawn with ``default_rng(SeedSequence(seed).spawn(...)[j])``,
+        so the run is the same whatever the executor, the number of workers and the chunk size.
+        ``Gamma0``/``g0`` given here (one value each) are used when the sampler does not return them.
+    n : int
+        Number of trajectories drawn by ``sampler`` (only with a sampler).
+    seed : int, SeedSequence or None
+        Root of the sampler's seeds (None: fresh entropy, recorded in ``stats["seed"]``).
+    reduce : None, "final" or callable
+        Done on the workers before results travel: None keeps every output time; ``"final"`` keeps
+        only the last one (time axis of length 1; NaN for a trajectory a terminal event stopped
+        earlier, as in the Solution); a module-level callable ``reduce(sol) -> Solution`` (same batch
+        axes, the same times for every chunk) anything else.
+    progress : bool
+        A progress bar over trajectories (needs tqdm: ``liesuslov[progress]``).
+    retries : int
+        Times a chunk whose task errored (lost worker, broken pool) is resubmitted before its
+        trajectories get status -1. Bad input (ValueError/TypeError from a task) is raised at once.
+    max_in_flight : int, optional
+        Chunks submitted but not yet collected (default 3 per worker): bounds memory.
+    overwrite : bool
+        Replace an existing store.
+    **options
+        Passed to :func:`~liesuslov.integrate` (``method``, ``h``, ``rtol``, ``atol``, ``reconstruct``,
+        ``chart``, ``backend``, ...).
+
+    Returns
+    -------
+    Ensemble
+        ``t`` (N,), ``omega`` (N, ..., d), ``Omega``, ``Gamma``, ``g``, ``status`` (...), ``success``,
+        ``stats``; the batch axes are those of the initial data (``(n,)`` with a sampler).
+
+    Raises
+    ------
+    ValueError, TypeError
+        Bad arguments, naming the argument (also a bad initial state found by a worker).
+    """
+    from ..integrators import integrate
+
+    t0, t1 = check_t_span(t_span)
+    t_eval = np.array([t0, t1]) if t_eval is None else check_t_eval(t_eval, t0, t1)
+    if "alg" in options or not hasattr(system, "algebra"):
+        raise TypeError(f"system must be a SuslovSystem (or a model), got {type(system).__name__}")
+    allowed = set(inspect.signature(integrate).parameters) - {"system", "Omega0", "t_span", "Gamma0", "g0", "t_eval",
+                                                              "progress"}
+    unknown = sorted(set(options) - allowed)
+    if unknown:
+        raise TypeError(f"unknown option(s) {unknown} for integrate; allowed: {sorted(allowed)}")
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"progress must be True or False, got {type(progress).__name__}")
+    retries = _nonneg_int(retries, "retries")
+    if executor is not None and not callable(getattr(executor, "submit", None)):
+        raise TypeError(f"executor must be None, a concurrent.futures.Executor or a dask.distributed.Client "
+                        f"(something with submit), got {type(executor).__name__}")
+    if reduce is not None and not callable(reduce) and reduce not in REDUCTIONS:
+        raise ValueError(f"reduce must be None, one of {list(REDUCTIONS)} or a module-level callable "
+                         f"reduce(sol) -> Solution, got {reduce!r}")
+
+    init: dict[str, np.ndarray] = {}
+    seed_parts = None
+    if sampler is not None:
+        if not callable(sampler):
+            raise TypeError(f"sampler must be a callable sampler(rng, size) -> dict, got {type(sampler).__name__}")
+        if Omega0 is not None:
+            raise ValueError("Omega0 must be None when a sampler draws the initial data (sampler=...)")
+        if n is None:
+            raise ValueError("n (the number of trajectories to draw) is required with sampler=...")
+        batch_shape = (_positive_int(n, "n"),)
+        seed_parts = _seed_parts(seed)
+        for key, v in (("Gamma0", Gamma0), ("g0", g0)):
+            if v is not None:
+                init[key] = _as_array(v, key, _CORE[key])
+        cores = {k: _CORE[k] for k in init}
+        _broadcast_batch(init, cores, batch_shape)
+    else:
+        if Omega0 is None:
+            raise ValueError("Omega0 is required (or draw initial data with sampler=... and n=...)")
+        if n is not None or seed is not None:
+            raise ValueError("n and seed are used only with sampler=...; the batch is the shape of Omega0")
+        init["Omega0"] = _as_array(Omega0, "Omega0", 1)
+        for key, v in (("Gamma0", Gamma0), ("g0", g0)):
+            if v is not None:
+                init[key] = _as_array(v, key, _CORE[key])
+        cores = {k: (_omega_core(system, init[k]) if k == "Omega0" else _CORE[k]) for k in init}
+        batch_shape = _broadcast_batch(init, cores, None)
+    B = math.prod(batch_shape)
+    if B == 0:
+        raise ValueError(f"the batch of initial data is empty (batch shape {batch_shape})")
+
+    W = _n_workers(executor)
+    if chunk_size is None:
+        chunk_size = B if (executor is None and store is None) else max(1, min(4096, -(-B // (4 * W))))
+    chunk_size = _positive_int(chunk_size, "chunk_size")
+    max_in_flight = 3 * W if max_in_flight is None else _positive_int(max_in_flight, "max_in_flight")
+    bounds = [(a, min(a + chunk_size, B)) for a in range(0, B, chunk_size)]
+
+    if executor is not None:  # a clear error here rather than a pickling traceback from a worker
+        for name, obj in (("system", system), ("sampler", sampler), ("reduce", reduce)):
+            try:
+                pickle.dumps(obj)
+            except Exception as exc:  # noqa: BLE001 - any pickling failure
+                raise TypeError(f"{name} must pickle to be sent to the executor's workers ({exc}); build it from "
+                                "module-level functions and classes (no lambdas or closures)") from exc
+
+    root = None
+    if store is not None:
+        root = _prepare_store(store, overwrite)
+    manifest = {"format": FORMAT, "batch_shape": list(batch_shape), "bounds": bounds, "complete": False,
+                "chunk_size": chunk_size, "t_span": [t0, t1]}
+    if root is not None:
+        _write_manifest(root, manifest)
+
+    def make_task(i: int) -> _Task:
+        a, b = bounds[i]
+        chunk = {k: _take(v, cores[k], batch_shape, a, b) for k, v in init.items()}
+        return _Task(i, a, b, system, (t0, t1), t_eval, dict(options), chunk or None, sampler, seed_parts,
+                     SAMPLER_BLOCK, reduce)
+
+    bar = _progress_bar(progress, B)
+    started = time.perf_counter()
+    collected: dict[str, Any] = {"arrays": None, "status": np.full(B, -1, dtype=np.int64), "t": None,
+                                 "tails": None, "meta": None, "stats": [], "failed": [], "retries": 0,
+                                 "traj_stats": {}}
+    try:
+        _run_all(executor, make_task, bounds, retries, max_in_flight, collected, root, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - started
+
+    stats = _merge_stats(collected["stats"])
+    stats.update({"chunks": len(bounds), "chunk_size": chunk_size, "failed_chunks": collected["failed"],
+                  "retries": collected["retries"], "wall_time": wall, "batch": B,
+                  "executor": "none" if executor is None else type(executor).__name__,
+                  "reduce": reduce if reduce is None or isinstance(reduce, str) else getattr(reduce, "__name__",
+                                                                                             repr(reduce))})
+    if seed_parts is not None:
+        stats["seed"] = seed_parts[0]
+    meta = collected["meta"] or {}
+    message = (f"{len(collected['failed'])} of {len(bounds)} chunks failed (status -1): "
+               f"{collected['failed'][0]['error']}" if collected["failed"] else meta.get("message", ""))
+    t_out = collected["t"] if collected["t"] is not None else (t_eval[-1:] if reduce == "final" else t_eval)
+    tails = collected["tails"] if collected["tails"] is not None else _fallback_tails(system, init, sampler, options)
+    if root is not None:
+        manifest.update({"complete": True, "t": t_out, "tails": {k: list(v) for k, v in tails.items()},
+                         "meta": {"n": meta.get("n"), "algebra_name": meta.get("algebra_name", "")},
+                         "stats": stats, "message": message,
+                         "trajectory_stats": {k: v.dtype.str for k, v in collected["traj_stats"].items()}})
+        _write_manifest(root, manifest)
+        ens = open_ensemble(root)
+        ens.message = message
+        return ens
+    if collected["arrays"] is not None:
+        arrays = {k: v.reshape((v.shape[0],) + batch_shape + tails[k]) for k, v in collected["arrays"].items()}
+    else:  # every chunk failed: NaN arrays of the shapes a success would have had
+        arrays = {k: np.full((t_out.size,) + batch_shape + v, np.nan) for k, v in tails.items()}
+    return Ensemble(t=t_out, batch_shape=batch_shape, bounds=bounds, tails=tails, stats=stats, n=meta.get("n"),
+                    algebra_name=meta.get("algebra_name", ""), message=message, arrays=arrays,
+                    status=collected["status"].reshape(batch_shape), traj_stats=collected["traj_stats"])
+
+
+def _run_all(executor, make_task, bounds, retries, max_in_flight, collected, root, bar) -> None:
+    """Submit chunks (at most ``max_in_flight`` pending), collect them as they finish, retry failures."""
+    todo = list(range(len(bounds)))[::-1]  # a stack: pop() gives chunks in order
+    attempts: dict[int, int] = {}
+    pending: dict[Any, int] = {}
+
+    def submit(i: int) -> None:
+        try:
+            pending[_submit(executor, make_task(i), attempts.get(i, 0))] = i
+        except _USER_ERRORS:
+            raise
+        except Exception as exc:  # noqa: BLE001 - a broken pool refuses submissions: count as a failed attempt
+            fail(i, exc)
+
+    def fail(i: int, exc: BaseException | None, error: str | None = None) -> None:
+        attempts[i] = attempts.get(i, 0) + 1
+        if error is None and attempts[i] <= retries:
+            collected["retries"] += 1
+            todo.append(i)
+        else:
+            a, b = bounds[i]
+            error = error or f"{type(exc).__name__}: {exc}"
+            collected["failed"].append({"chunk": i, "start": a, "stop": b, "error": error})
+            if bar is not None:
+                bar.update(b - a)
+
+    try:
+        while todo or pending:
+            while todo and len(pending) < max_in_flight:
+                submit(todo.pop())
+            if not pending:
+                continue
+            for fut in _wait_first(executor, pending):
+                i = pending.pop(fut)
+                try:
+                    payload = fut.result()
+                except _USER_ERRORS:
+                    raise
+                except Exception as exc:  # noqa: BLE001 - lost worker, broken pool, ...: retry then give up
+                    fail(i, exc)
+                    continue
+                if "error" in payload:  # the computation itself failed: the same again on a retry
+                    fail(i, None, payload["error"])
+                    continue
+                _collect(i, bounds[i], payload, collected, root)
+                if bar is not None:
+                    bar.update(bounds[i][1] - bounds[i][0])
+                del fut, payload  # release the result (Dask frees it on the cluster too)
+    finally:
+        for fut in pending:  # on an error raised here, leave nothing running on the executor
+            cancel = getattr(fut, "cancel", None)
+            if cancel is not None:
+                cancel()
+
+
+def _collect(i: int, bound, payload: dict, collected: dict, root: Path | None) -> None:
+    a, b = bound
+    if collected["t"] is None:
+        collected["t"] = payload["t"]
+        collected["tails"] = {k: payload[k].shape[2:] for k in _ARRAYS if k in payload}
+        collected["meta"] = payload["meta"]
+    elif payload["t"].shape != collected["t"].shape:
+        raise ValueError(f"chunks returned different output times ({payload['t'].shape} and "
+                         f"{collected['t'].shape}); reduce must keep the same times for every chunk")
+    collected["status"][a:b] = payload["status"]
+    collected["stats"].append(payload["meta"]["stats"])
+    B = collected["status"].size
+    for key, v in payload.items():
+        if key.startswith(_STAT):
+            name = key[len(_STAT):]
+            if name not in collected["traj_stats"]:
+                # a store keeps them in its shards: only their dtype here (memory stays bounded)
+                collected["traj_stats"][name] = (np.empty(0, dtype=v.dtype) if root is not None else
+                                                 np.full(B, np.nan if v.dtype.kind == "f" else 0, dtype=v.dtype))
+            if root is None:
+                collected["traj_stats"][name][a:b] = v
+    if root is not None:
+        _write_shard(root, i, payload)
+        return
+    if collected["arrays"] is None:
+        T = payload["t"].size
+        collected["arrays"] = {k: np.full((T, B) + payload[k].shape[2:], np.nan) for k in _ARRAYS if k in payload}
+    for k, arr in collected["arrays"].items():
+        arr[:, a:b] = payload[k]
+
+
+def _fallback_tails(system, init: dict, sampler, options: dict) -> dict[str, tuple[int, ...]]:
+    """Trailing shapes of the arrays when no chunk came back (every one failed): from the system."""
+    alg = system.algebra
+    k = getattr(getattr(system, "constraints", None), "dim", None) or getattr(system, "k", alg.dim)
+    tails = {"xi": (int(k),), "omega": (alg.dim,)}
+    m = getattr(alg, "matrix_size", None)
+    if m is not None and ("Gamma0" in init or (sampler is not None and alg.name.startswith("so("))):
+        tails["Gamma"] = (m,)
+    if m is not None and options.get("reconstruct"):
+        tails["g"] = (m, m)
+    return tails
+
+
+def _merge_stats(chunk_stats: list[dict]) -> dict:
+    """Counts (nfev, steps, rejected) summed over chunks; the rest (method, form, ...) from the first chunk."""
+    out: dict[str, Any] = {}
+    for st in chunk_stats:
+        for k, v in st.items():
+            if k in ("wall_time", "batch"):
+                continue
+            if k in _SUMMED and isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool):
+                out[k] = out.get(k, 0) + v
+            else:
+                out.setdefault(k, v)
+    return out
+
+
+# ====================================================================== validation helpers
+def _as_array(v, name: str, core: int) -> np.ndarray:
+    if v is None:
+        raise TypeError(f"{name} must be an array, got None")
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be an array of numbers, got {type(v).__name__}") from exc
+    if a.ndim < core:
+        raise ValueError(f"{name} must have at least {core} axes, got shape {a.shape}")
+    return a
+
+
+def _omega_core(system, O: np.ndarray) -> int:
+    """Trailing axes of Omega0 (2: matrices, 1: coordinates), by integrate's rule."""
+    alg = system.algebra
+    m = getattr(alg, "matrix_size", None)
+    if alg.name.startswith("so(") and O.ndim >= 2 and O.shape[-2:] == (m, m):
+        scale = max(1.0, float(np.abs(O).max()) if O.size else 1.0)
+        if np.allclose(O, -np.swapaxes(O, -1, -2), rtol=0, atol=1e-12 * scale) or alg.dim != m:
+            return 2
+    if O.shape[-1] != alg.dim:
+        raise ValueError(f"Omega0 must have shape (..., {alg.dim}) (coordinates)"
+                         + (f" or (..., {m}, {m}) (skew matrices)" if alg.name.startswith("so(") else "")
+                         + f", got {O.shape}")
+    return 1
+
+
+def _broadcast_batch(init: dict, cores: dict, batch_shape) -> tuple[int, ...]:
+    shapes = {k: v.shape[:v.ndim - cores[k]] for k, v in init.items()}
+    try:
+        out = np.broadcast_shapes(*shapes.values(), *([batch_shape] if batch_shape is not None else []))
+    except ValueError as exc:
+        what = ", ".join(f"{k}: {s}" for k, s in shapes.items())
+        raise ValueError(f"the batch axes of the initial data do not broadcast ({what}"
+                         + (f", n: {batch_shape}" if batch_shape is not None else "") + ")") from exc
+    if batch_shape is not None and out != tuple(batch_shape):
+        raise ValueError(f"with a sampler, Gamma0 and g0 must be one value each (or n of them), got batch "
+                         f"axes {shapes}")
+    return tuple(out)
+
+
+def _take(a: np.ndarray, core: int, batch_shape: tuple[int, ...], start: int, stop: int) -> np.ndarray:
+    """Flat (C-order) trajectories ``[start, stop)`` of ``a`` broadcast to ``batch_shape``: (stop - start, core...)."""
+    lead = a.shape[:a.ndim - core]
+    tail = a.shape[a.ndim - core:]
+    if lead == tuple(batch_shape):  # the common case: a view, no index arithmetic
+        return np.ascontiguousarray(a.reshape((-1,) + tail)[start:stop])
+    idx = np.unravel_index(np.arange(start, stop), batch_shape) if batch_shape else ()
+    pad = len(batch_shape) - len(lead)
+    sel = tuple(np.zeros(stop - start, dtype=np.intp) if s == 1 else idx[pad + j] for j, s in enumerate(lead))
+    if not lead:
+        return np.broadcast_to(a, (stop - start,) + tail).copy()
+    return np.ascontiguousarray(a[sel])
+
+
+def _prepare_store(store, overwrite: bool) -> Path:
+    if not isinstance(store, (str, os.PathLike)):
+        raise TypeError(f"store must be None or a directory path (str or os.PathLike), got {type(store).__name__}")
+    root = Path(store)
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"store {str(root)!r} exists and is not a directory; pass a directory path")
+    if (root / MANIFEST).exists():
+        if not overwrite:
+            raise ValueError(f"store {str(root)!r} already holds an ensemble; pass overwrite=True to replace it, "
+                             "or another directory")
+        for p in root.glob("chunk-*.npz"):
+            p.unlink()
+        (root / MANIFEST).unlink()
+    root.mkdir(parents=True, exist_ok=True)
+    return root
+
+
+def _progress_bar(on: bool, total: int):
+    if not on:
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError as exc:
+        raise ValueError("progress=True needs tqdm: pip install 'liesuslov[progress]'") from exc
+    return tqdm(total=total, unit="traj", desc="ensemble")
