@@ -1,0 +1,51 @@
+"""The whole solve compiled (numba), one trajectory at a time: :func:`solve` takes a :class:`~.problem.Problem`.
+
+Per trajectory, inside one jitted function (no Python per step, no allocation per step): the RKMK stages of
+the method's :class:`~.plan.StagePlan`, the step-size controller and the error norm of :mod:`.control`
+(those very functions, compiled by numba), the continuous extension for ``t_eval`` and events, event
+location by a bracketing root finder (Illinois), re-projection, failures with their time and code. A batch
+runs in contiguous chunks on threads (the jitted loop releases the GIL; no parfor, so one function to
+compile); a trajectory's numbers do not depend on its batch mates or the chunking (no reduction across
+trajectories, the same code path for B = 1 and B > 1).
+
+Cost (measured on the 2-core machine under load, 2026-11-24): the first compiled call on an empty cache
+compiles one specialisation (~66 s CPU under load; the one int64 and one float64 parameter array carry
+every scene, so no other scene compiles again); later processes load it from the cache (< 1 s). RKMK4 with
+reconstruction, h = 0.005: so(3) ~1.4 µs per step (~5x a plain loop hard-coded for that method: the
+kernel's loops run over run-time sizes — k, stages, layouts — that the plain loop has as constants), a
+batch of 10^4 ~0.7 µs per trajectory-step on both cores; so(4) (dense kind) ~4.8 µs per step;
+Fedorov–Kozlov SO(256) (low-rank kind) ~0.55 ms per step.
+
+What is compiled
+----------------
+* the field: :func:`~.compiled.compile_plan` probes ``model.xi_dot`` as a verified polynomial of degree <= 2
+  in ``(xi, Gamma)`` (sparse COO lists) and ``Omega(xi)`` as a linear map;
+* the group part in one of the kinds of :func:`kind_for`:
+
+  - ``"so3"``: rotation vectors, closed forms (Rodrigues, the exact so(3) dexp⁻¹ and Cayley maps);
+  - ``"dense"``: m×m matrices — so(n) (skew brackets, Padé scaling and squaring with the skew norm bound
+    and a Newton–Schulz polish, Cayley by LU) or a general matrix algebra (se(2), se(3): full brackets,
+    Padé with the 1-norm, Cayley by LU); dexp⁻¹ is the series ``Σ_{k < p-1} (B_k/k!) ad^k`` with the
+    sign of the right side (:func:`liesuslov.groups.dexpinv_terms` terms);
+  - ``"lowrank"``: Fedorov–Kozlov models (``Omega = u e_n^T - e_n u^T``): stage values ``Q M Q^T`` in a
+    per-step orthonormal basis Q (n × r, r <= S + 1) built stage by stage by Gram–Schmidt (twice), as
+    :class:`~.charts._LowRankKernel`: O(n r + r³) per stage, O(n² r) per step.
+
+Layouts of an algebra element (a stage's ``h K_j``): so3 3 numbers ``(X21, X02, X10)``, dense m² (row
+major), lowrank r² (the r×r coordinates M in the step's basis).
+
+Shared closed forms: ``groups._cayley_coefficients`` and ``groups._dexp3_series`` are jitted as they stand;
+``groups._rodrigues`` and ``groups._dexp3_coefficient`` branch on ``isinstance`` (numpy arrays or floats)
+and cannot be compiled: :func:`_rodrigues` and :func:`_dexp3_coefficient` below are their scalar branches.
+
+Importing this module imports numba; ``import liesuslov`` does not import it.
+"""
+
+
+from __future__ import annotations
+
+from ..compiled import CompilePlan, NotCompilable, compile_plan, numba_available  # noqa: F401
+from .common import EVENT_CAP, KINDS, LOWRANK_MIN_N  # noqa: F401
+from .wrapper import check, kind_for, solve  # noqa: F401
+
+__all__ = ["solve", "check", "kind_for", "NotCompilable", "KINDS", "LOWRANK_MIN_N"]

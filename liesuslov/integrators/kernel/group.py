@@ -1,0 +1,331 @@
+"""The model (the probed polynomial field) and the group part by kind (so3 rotation vectors, dense matrices,
+the low-rank Fedorov–Kozlov basis): Omega, dphi⁻¹, the action on Gamma, the update of g, the state error."""
+
+from __future__ import annotations
+
+import math
+
+from .common import _jit
+from .maps import _dexp3_coefficient, _mat_act, _mat_dinv, _mat_phi, _mm, _so3_coef
+
+
+# ====================================================================================== the model
+@_jit
+def _field(x, Gam, has_gamma, fidx, fval, z, out):
+    """out = f(x, Gam): the probed polynomial (COO, see :class:`~.compiled.CompilePlan`); z scratch."""
+    k = x.shape[0]
+    for c in range(k):
+        z[c] = x[c]
+    if has_gamma:
+        for c in range(Gam.shape[0]):
+            z[k + c] = Gam[c]
+    for c in range(out.shape[0]):
+        out[c] = 0.0
+    for t in range(fval.shape[0]):
+        v = fval[t]
+        i = fidx[t, 1]
+        j = fidx[t, 2]
+        if i >= 0:
+            v = v * z[i]
+        if j >= 0:
+            v = v * z[j]
+        out[fidx[t, 0]] += v
+
+
+# ====================================================================================== the group part by kind
+# kind 1 so3 (3 numbers), 2 dense (m*m), 3 lowrank (r*r in the basis Q); see the module docstring.
+@_jit
+def _omega_alg(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
+    """out = Omega(x) in the kind's layout. Low-rank: adds column ``nc`` to the basis Q (Gram–Schmidt,
+    twice) and returns the number of columns; the other kinds return nc unchanged."""
+    if kind == 3:
+        n = Q.shape[0]
+        r = Q.shape[1]
+        u_n = n - 1
+        for i in range(r):
+            cvec[i] = 0.0
+        w = Om[0]  # scratch row (n,)
+        if nc == 1:
+            acc = 0.0
+            for p in range(u_n):
+                w[p] = x[p]
+                acc += x[p] * x[p]
+            rho1 = math.sqrt(acc)
+        else:
+            for i in range(1, nc):
+                acc = 0.0
+                for p in range(u_n):
+                    acc += Q[p, i] * x[p]
+                cvec[i] = acc
+            acc = 0.0
+            for p in range(u_n):
+                v = x[p]
+                for i in range(1, nc):
+                    v -= Q[p, i] * cvec[i]
+                w[p] = v
+                acc += v * v
+            rho1 = math.sqrt(acc)
+            for i in range(1, nc):  # second pass
+                acc = 0.0
+                for p in range(u_n):
+                    acc += Q[p, i] * w[p]
+                cvec[i] += acc
+                for p in range(u_n):
+                    w[p] -= Q[p, i] * acc
+        acc = 0.0
+        for p in range(u_n):
+            acc += w[p] * w[p]
+        rho = math.sqrt(acc)
+        if rho > 0.5 * rho1:
+            cvec[nc] = rho
+            for p in range(u_n):
+                Q[p, nc] = w[p] / rho
+        for i in range(r * r):
+            out[i] = 0.0
+        for i in range(r):
+            out[i * r] = cvec[i]
+            out[i] = -cvec[i]
+        out[0] = 0.0
+        return nc + 1
+    n = Om.shape[0]
+    for i in range(n):
+        for j in range(n):
+            Om[i, j] = 0.0
+    for t in range(wval.shape[0]):
+        Om[widx[t, 1], widx[t, 2]] += wval[t] * x[widx[t, 0]]
+    if skew:
+        for i in range(n):
+            for j in range(i + 1, n):
+                Om[j, i] = -Om[i, j]
+    if kind == 1:
+        out[0] = Om[2, 1]
+        out[1] = Om[0, 2]
+        out[2] = Om[1, 0]
+    else:
+        for i in range(n):
+            for j in range(n):
+                out[i * n + j] = Om[i, j]
+    return nc
+
+
+@_jit
+def _block(Th, r, ra, buf):
+    """The leading ra×ra block of the r×r matrix stored flat in Th, as a contiguous (ra, ra) matrix."""
+    Mb = buf[:ra * ra].reshape((ra, ra))
+    for i in range(ra):
+        for j in range(ra):
+            Mb[i, j] = Th[i * r + j]
+    return Mb
+
+
+@_jit
+def _scratch(Wf, vbf, n):
+    """W (12, n, n) and vb (n, 1): C-contiguous views of the flat scratch, sized for n×n matrices."""
+    return Wf[:12 * n * n].reshape((12, n, n)), vbf[:n].reshape((n, 1))
+
+
+@_jit
+def _alg_sq(kind, Th):
+    """|Theta|_F^2 / 2 (the squared rotation angle on so(3)): the chart-domain test of exp."""
+    acc = 0.0
+    for i in range(Th.shape[0]):
+        acc += Th[i] * Th[i]
+    return acc if kind == 1 else 0.5 * acc
+
+
+@_jit
+def _alg_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+    """out = h dphi^{-1}_{-Th}(Om) in the kind's layout."""
+    if kind == 1:
+        t0, t1, t2_ = Th[0], Th[1], Th[2]
+        a0, a1, a2 = Om[0], Om[1], Om[2]
+        tt = t0 * t0 + t1 * t1 + t2_ * t2_
+        if chart == 0:  # exact: (1 - c θ²) a + ½ θ × a + c (θ·a) θ
+            c = _dexp3_coefficient(tt)
+            cc, aa, bb = 1.0 - c * tt, 0.5, c
+        else:  # exact: a + ½ θ × a + ¼ (θ·a) θ
+            cc, aa, bb = 1.0, 0.5, 0.25
+        d = bb * (t0 * a0 + t1 * a1 + t2_ * a2)
+        out[0] = h * (cc * a0 + aa * (t1 * a2 - t2_ * a1) + d * t0)
+        out[1] = h * (cc * a1 + aa * (t2_ * a0 - t0 * a2) + d * t1)
+        out[2] = h * (cc * a2 + aa * (t0 * a1 - t1 * a0) + d * t2_)
+        return
+    if kind == 2:
+        n = int(math.sqrt(Th.shape[0]) + 0.5)
+        W, _ = _scratch(Wf, bufs[1], n)
+        Tm = Th.reshape((n, n))
+        Am = Om.reshape((n, n))
+        Rm = bufs[2][:n * n].reshape((n, n))
+        _mat_dinv(chart, skew, Tm, Am, Rm, W, bern)
+        for i in range(n * n):
+            out[i] = h * bufs[2][i]
+        return
+    ra = nc
+    W, _ = _scratch(Wf, bufs[2], ra)
+    Tm = _block(Th, r, ra, bufs[0])
+    Am = _block(Om, r, ra, bufs[1])
+    Rm = bufs[2][:ra * ra].reshape((ra, ra))
+    _mat_dinv(chart, skew, Tm, Am, Rm, W, bern)
+    for i in range(r * r):
+        out[i] = 0.0
+    for i in range(ra):
+        for j in range(ra):
+            out[i * r + j] = h * Rm[i, j]
+
+
+@_jit
+def _alg_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
+    """out = phi(sign Th) v for a vector v (n,)."""
+    if kind == 1:
+        w0, w1, w2 = Th[0], Th[1], Th[2]
+        c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
+        a = sign * a
+        v0, v1, v2 = v[0], v[1], v[2]
+        d = b * (w0 * v0 + w1 * v1 + w2 * v2)
+        out[0] = c * v0 + a * (w1 * v2 - w2 * v1) + d * w0
+        out[1] = c * v1 + a * (w2 * v0 - w0 * v2) + d * w1
+        out[2] = c * v2 + a * (w0 * v1 - w1 * v0) + d * w2
+        return
+    if kind == 2:
+        n = v.shape[0]
+        W, vb = _scratch(Wf, vbf, n)
+        _mat_act(chart, skew, Th.reshape((n, n)), sign, v, out, W, vb)
+        return
+    n = v.shape[0]
+    ra = nc
+    W, vb = _scratch(Wf, vbf, ra)
+    Mb = _block(Th, r, ra, bufs[0])
+    y = bufs[1][:ra]
+    z = bufs[2][:ra]
+    for i in range(ra):
+        acc = 0.0
+        for p in range(n):
+            acc += Q[p, i] * v[p]
+        y[i] = acc
+    _mat_act(chart, skew, Mb, sign, y, z, W, vb)
+    for i in range(ra):
+        z[i] -= y[i]
+    for p in range(n):
+        acc = v[p]
+        for i in range(ra):
+            acc += Q[p, i] * z[i]
+        out[p] = acc
+
+
+@_jit
+def _alg_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+    """The group part moved by Th: ``g phi(Th)`` (mode g, G flat m*m) or ``phi(-Th) Gamma`` (mode gamma)."""
+    if mode == 1:
+        _alg_act(kind, chart, skew, Th, -1.0, G, out, Wf, vbf, Q, nc, r, bufs)
+        return
+    if kind == 1:  # g R with R = c I + a hat(w) + b w w^T, by scalars (no reshape, no scratch)
+        w0, w1, w2 = Th[0], Th[1], Th[2]
+        c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
+        bw0, bw1, bw2 = b * w0, b * w1, b * w2
+        r00, r01, r02 = c + bw0 * w0, bw0 * w1 - a * w2, bw0 * w2 + a * w1
+        r10, r11, r12 = bw0 * w1 + a * w2, c + bw1 * w1, bw1 * w2 - a * w0
+        r20, r21, r22 = bw0 * w2 - a * w1, bw1 * w2 + a * w0, c + bw2 * w2
+        for i in range(3):
+            g0, g1, g2 = G[3 * i], G[3 * i + 1], G[3 * i + 2]
+            out[3 * i] = g0 * r00 + g1 * r10 + g2 * r20
+            out[3 * i + 1] = g0 * r01 + g1 * r11 + g2 * r21
+            out[3 * i + 2] = g0 * r02 + g1 * r12 + g2 * r22
+        return
+    if kind == 2:
+        n = int(math.sqrt(G.shape[0]) + 0.5)
+        W, _ = _scratch(Wf, vbf, n)
+        R = W[10]
+        _mat_phi(chart, skew, Th.reshape((n, n)), R, W)
+        _mm(G.reshape((n, n)), R, out.reshape((n, n)))
+        return
+    # low rank: g + (g Q) (phi(M) - I) Q^T
+    n = Q.shape[0]
+    ra = nc
+    W, _ = _scratch(Wf, vbf, ra)
+    Mb = _block(Th, r, ra, bufs[0])
+    F = bufs[1][:ra * ra].reshape((ra, ra))
+    _mat_phi(chart, skew, Mb, F, W)
+    for i in range(ra):
+        F[i, i] -= 1.0
+    _g_low_rank(G.reshape((n, n)), Q, F, ra, PQ, PQ2, out.reshape((n, n)), True)
+
+
+@_jit
+def _g_low_rank(Gm, Q, F, ra, PQ, PQ2, Om, add_g):
+    """``Om = (g if add_g else 0) + g Q F Q^T`` for g (n, n), Q (n, >= ra), F (ra, ra): O(n^2 ra)."""
+    n = Q.shape[0]
+    P1 = PQ[:, :ra]
+    P2 = PQ2[:, :ra]
+    for i in range(n):
+        for j in range(ra):
+            P1[i, j] = 0.0
+        for p in range(n):
+            g = Gm[i, p]
+            if g != 0.0:
+                for j in range(ra):
+                    P1[i, j] += g * Q[p, j]
+        for j in range(ra):
+            acc = 0.0
+            for p in range(ra):
+                acc += P1[i, p] * F[p, j]
+            P2[i, j] = acc
+        for j in range(n):
+            acc = Gm[i, j] if add_g else 0.0
+            for p in range(ra):
+                acc += P2[i, p] * Q[j, p]
+            Om[i, j] = acc
+
+
+@_jit
+def _alg_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+    """The chart increment Ea carried to the state: ``g1 E`` (mode g, m*m entries) or ``E Gamma1`` (mode
+    gamma, n entries) — the error estimate of the group part, and (with Ea = Omega) its velocity."""
+    if kind == 1:
+        e0, e1, e2 = Ea[0], Ea[1], Ea[2]
+        if mode == 1:
+            v0, v1, v2 = G1[0], G1[1], G1[2]
+            out[0] = e1 * v2 - e2 * v1
+            out[1] = e2 * v0 - e0 * v2
+            out[2] = e0 * v1 - e1 * v0
+            return
+        for i in range(3):  # row i of g1 times hat(e)
+            g0, g1, g2 = G1[3 * i], G1[3 * i + 1], G1[3 * i + 2]
+            out[3 * i] = g1 * e2 - g2 * e1
+            out[3 * i + 1] = g2 * e0 - g0 * e2
+            out[3 * i + 2] = g0 * e1 - g1 * e0
+        return
+    if kind == 2:
+        if mode == 1:
+            n = G1.shape[0]
+            for i in range(n):
+                acc = 0.0
+                for j in range(n):
+                    acc += Ea[i * n + j] * G1[j]
+                out[i] = acc
+            return
+        n = int(math.sqrt(G1.shape[0]) + 0.5)
+        _mm(G1.reshape((n, n)), Ea.reshape((n, n)), out.reshape((n, n)))
+        return
+    n = Q.shape[0]
+    ra = nc
+    Eb = _block(Ea, r, ra, bufs[0])
+    if mode == 1:
+        y = bufs[1][:ra]
+        z = bufs[2][:ra]
+        for i in range(ra):
+            acc = 0.0
+            for p in range(n):
+                acc += Q[p, i] * G1[p]
+            y[i] = acc
+        for i in range(ra):
+            acc = 0.0
+            for j in range(ra):
+                acc += Eb[i, j] * y[j]
+            z[i] = acc
+        for p in range(n):
+            acc = 0.0
+            for i in range(ra):
+                acc += Q[p, i] * z[i]
+            out[p] = acc
+        return
+    _g_low_rank(G1.reshape((n, n)), Q, Eb, ra, PQ, PQ2, out.reshape((n, n)), False)

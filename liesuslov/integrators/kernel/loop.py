@@ -1,0 +1,692 @@
+"""One trajectory's whole solve (stages, controller, output, events, failures, re-projection) and the
+batch over threads."""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numba  # (ImportError without numba: the front door then runs numpy)
+import numpy as np
+
+from .common import (
+    _F_ATOL,
+    _F_EXPO,
+    _F_H,
+    _F_RTOL,
+    _F_T0,
+    _F_T1,
+    _FHEAD,
+    _I_A,
+    _I_ADAPT,
+    _I_CHART,
+    _I_FSAL,
+    _I_HASG,
+    _I_K,
+    _I_KIND,
+    _I_M,
+    _I_MAXST,
+    _I_MODE,
+    _I_NB,
+    _I_NE,
+    _I_NEV,
+    _I_NEWIN,
+    _I_NF,
+    _I_NT,
+    _I_NW,
+    _I_ORDER,
+    _I_P,
+    _I_Q,
+    _I_R,
+    _I_RECORD,
+    _I_RENORM,
+    _I_REPROJ,
+    _I_S,
+    _I_SKEW,
+    _I_SS,
+    _NHEAD,
+    _accept_factor,
+    _combine,
+    _initial_step,
+    _jit,
+    _probe_step,
+    _reject_factor,
+    _scale,
+)
+from .group import _alg_act, _alg_dinv, _alg_sq, _alg_state, _alg_update, _field, _omega_alg
+from .maps import _PI2, _polar_step
+
+
+# ====================================================================================== one trajectory
+@_jit
+def _ulp(t, direction):
+    return abs(np.nextafter(t, direction * np.inf) - t)
+
+
+@_jit
+def _finite(x):
+    for i in range(x.shape[0]):
+        if not np.isfinite(x[i]):
+            return False
+    return True
+
+
+@_jit
+def _dense_at(th, dense, wts, xi, hL, hK, xit, Tht):
+    """The continuous extension at theta: weights b(theta) (Horner, as ``plan.dense_weights``), then
+    ``xit = xi + sum_j b_j hL_j`` and ``Tht = sum_j b_j hK_j``."""
+    S = dense.shape[0]
+    P = dense.shape[1]
+    for j in range(S):
+        accw = dense[j, P - 1] * th
+        for qq in range(P - 2, -1, -1):
+            accw = (accw + dense[j, qq]) * th
+        wts[j] = accw
+    for c in range(xit.shape[0]):
+        acc = 0.0
+        for j in range(S):
+            acc += wts[j] * hL[j, c]
+        xit[c] = xi[c] + acc
+    for c in range(Tht.shape[0]):
+        acc = 0.0
+        for j in range(S):
+            acc += wts[j] * hK[j, c]
+        Tht[c] = acc
+
+
+@_jit
+def _body_vertical(mode, G, gam, out):
+    """The vertical in the body frame: ``g^T gamma`` (mode g) or Gamma itself."""
+    n = out.shape[0]
+    if mode == 2:
+        for i in range(n):
+            acc = 0.0
+            for j in range(n):
+                acc += G[j * n + i] * gam[j]
+            out[i] = acc
+    else:
+        for i in range(n):
+            out[i] = G[i]
+
+
+@_jit
+def _solve_one(lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap, xi_out, G_out, status, t_stop,
+               failure, nfev_o, steps_o, rejected_o, ev_count, ev_t, ev_xi, ev_G):
+    """Integrate trajectories ``lo .. hi-1`` one after the other (see the module docstring); returns the
+    recorded steps of the last one (record mode, a single trajectory)."""
+    k = iprm[_I_K]
+    m = iprm[_I_M]
+    q = iprm[_I_Q]
+    mode = iprm[_I_MODE]
+    chart = iprm[_I_CHART]
+    kind = iprm[_I_KIND]
+    skew = iprm[_I_SKEW] != 0
+    has_g = iprm[_I_HASG] != 0
+    s = iprm[_I_S]
+    S = iprm[_I_SS]
+    ne = iprm[_I_NE]
+    P = iprm[_I_P]
+    fsal = iprm[_I_FSAL] != 0
+    new_in = iprm[_I_NEWIN] != 0
+    adaptive = iprm[_I_ADAPT] != 0
+    max_steps = iprm[_I_MAXST]
+    reproj = iprm[_I_REPROJ] != 0 and (skew or mode == 1)
+    renorm = iprm[_I_RENORM]
+    nb = iprm[_I_NB]
+    nf = iprm[_I_NF]
+    nw = iprm[_I_NW]
+    E = iprm[_I_NEV]
+    order = iprm[_I_ORDER]
+    record = iprm[_I_RECORD] != 0
+    r = iprm[_I_R]
+    a = iprm[_I_A]
+    NT = iprm[_I_NT]
+    o = _NHEAD
+    fidx = iprm[o:o + 3 * nf].reshape((nf, 3))
+    o += 3 * nf
+    widx = iprm[o:o + 3 * nw].reshape((nw, 3))
+    o += 3 * nw
+    ev_term = iprm[o:o + E]
+    ev_dir = iprm[o + E:o + 2 * E]
+    t0 = fprm[_F_T0]
+    t1 = fprm[_F_T1]
+    hfix = fprm[_F_H]
+    rtol = fprm[_F_RTOL]
+    atol = fprm[_F_ATOL]
+    expo = fprm[_F_EXPO]
+    o = _FHEAD
+    A = fprm[o:o + S * S].reshape((S, S))
+    o += S * S
+    bw = fprm[o:o + S]
+    o += S
+    err = fprm[o:o + ne * S].reshape((ne, S))
+    o += ne * S
+    dense = fprm[o:o + S * P].reshape((S, P))
+    o += S * P
+    bern = fprm[o:o + 2 * nb].reshape((nb, 2))
+    o += 2 * nb
+    fval = fprm[o:o + nf]
+    o += nf
+    wval = fprm[o:o + nw]
+    direction = 1.0 if t1 > t0 else -1.0
+    group = mode != 0
+    N = k + q
+    s_eval = s + (1 if new_in else 0)
+
+    rec_n = 0
+    t_rec = np.zeros(0)
+    xi_rec = np.zeros((0, xi0.shape[1]))
+    G_rec = np.zeros((0, G0.shape[1]))
+    for bi in range(lo, hi):
+        # ---------------------------------------------------------------- scratch, once per trajectory
+        n = m if has_g else 0
+        mm = 3 if kind == 1 else (m if kind == 2 else r)
+        F = np.zeros((S, k))
+        hL = np.zeros((S, k))
+        hK = np.zeros((S, a))
+        xi = xi0[bi].copy()
+        G = G0[bi].copy()
+        gam = gamma[bi]
+        xi1 = np.zeros(k)
+        G1 = np.zeros(q)
+        Th = np.zeros(a)
+        Th1 = np.zeros(a)
+        Oa = np.zeros(a)
+        Ea = np.zeros(a)
+        Eg = np.zeros(q)
+        Xi = np.zeros(k)
+        Gam0 = np.zeros(n)
+        Gam = np.zeros(n)
+        z = np.zeros(k + n)
+        Om = np.zeros((m if kind != 3 else 1, m))
+        W = np.zeros(12 * mm * mm)  # flat: viewed as (12, n, n) for the size at hand (_scratch)
+        vb = np.zeros(mm)
+        bufs = np.zeros((3, max(mm * mm, 1)))
+        Q = np.zeros((m if kind == 3 else 0, r))
+        if kind == 3:
+            Q[m - 1, 0] = 1.0
+        cvec = np.zeros(r)
+        PQ = np.zeros((m if kind == 3 else 0, r))
+        PQ2 = np.zeros((m if kind == 3 else 0, r))
+        Wg = np.zeros((2, m if (mode == 2 and reproj) else 0, m if (mode == 2 and reproj) else 0))
+        wts = np.zeros(S)
+        xit = np.zeros(k)
+        Gt = np.zeros(q)
+        Tht = np.zeros(a)
+        gold = np.zeros(E)
+        gnew = np.zeros(E)
+        ev_needG = np.zeros(E, np.bool_)
+        act_th = np.zeros(E)
+        act_e = np.zeros(E, np.int64)
+        sc_y = np.zeros(N)
+        f_y = np.zeros(N)
+        rec_n = 0
+        rec_cap = 64 if record else 0
+        t_rec = np.zeros(rec_cap)
+        xi_rec = np.zeros((rec_cap, k))
+        G_rec = np.zeros((rec_cap, q))
+        for e in range(E):
+            for c in range(q):
+                if ev_coef[bi, e, k + c] != 0.0:
+                    ev_needG[e] = True
+
+        nfev = 0
+        nsteps = 0
+        nrej = 0
+        st = 0
+        fail = 0
+        tst = t0
+        t = t0
+        ie = 0
+        if has_g:
+            _body_vertical(mode, G, gam, Gam0)
+        _field(xi, Gam0, has_g, fidx, fval, z, F[0])
+        nfev += 1
+        f0_ok = True
+        if not (_finite(F[0]) and _finite(xi) and _finite(G)):
+            fail = 1
+        else:
+            while ie < NT and t_eval[ie] == t0:
+                for c in range(k):
+                    xi_out[ie, bi, c] = xi[c]
+                for c in range(q):
+                    G_out[ie, bi, c] = G[c]
+                ie += 1
+            if record:
+                t_rec[0] = t0
+                xi_rec[0, :] = xi
+                G_rec[0, :] = G
+                rec_n = 1
+        for e in range(E):
+            acc = -ev_off[bi, e]
+            for c in range(k):
+                acc += ev_coef[bi, e, c] * xi[c]
+            for c in range(q):
+                acc += ev_coef[bi, e, k + c] * G[c]
+            gold[e] = acc
+        h = hfix * direction
+        if fail == 0 and adaptive and hfix == 0.0:
+            # Hairer's estimate on the embedded state y = (xi, G), f = (xi_dot, group velocity)
+            nc = 1
+            if kind == 3:
+                for p in range(m - 1):
+                    for j in range(1, r):
+                        Q[p, j] = 0.0
+            if group:
+                nc = _omega_alg(kind, skew, xi, widx, wval, Om, Q, nc, cvec, Oa)
+                _alg_state(kind, mode, G, Oa, Eg, Q, nc, r, bufs, PQ, PQ2)
+            for c in range(k):
+                sc_y[c] = _scale(xi[c], xi[c], rtol, atol)
+                f_y[c] = F[0, c]
+            for c in range(q):
+                sc_y[k + c] = _scale(G[c], G[c], rtol, atol)
+                f_y[k + c] = -Eg[c] if mode == 1 else Eg[c]
+            d0 = 0.0
+            d1 = 0.0
+            for c in range(k):
+                d0 += (xi[c] / sc_y[c]) ** 2
+            for c in range(q):
+                d0 += (G[c] / sc_y[k + c]) ** 2
+            for c in range(N):
+                d1 += (f_y[c] / sc_y[c]) ** 2
+            d0 = math.sqrt(d0 / N)
+            d1 = math.sqrt(d1 / N)
+            h0 = _probe_step(d0, d1)
+            hp = h0 * direction
+            for c in range(k):
+                xit[c] = xi[c] + hp * f_y[c]
+            for c in range(q):
+                Gt[c] = G[c] + hp * f_y[k + c]
+            if has_g:
+                _body_vertical(mode, Gt, gam, Gam)
+            _field(xit, Gam, has_g, fidx, fval, z, F[1])
+            nfev += 1
+            if group:
+                nc = 1
+                if kind == 3:
+                    for p in range(m - 1):
+                        for j in range(1, r):
+                            Q[p, j] = 0.0
+                nc = _omega_alg(kind, skew, xit, widx, wval, Om, Q, nc, cvec, Oa)
+                _alg_state(kind, mode, Gt, Oa, Eg, Q, nc, r, bufs, PQ, PQ2)
+            d2 = 0.0
+            for c in range(k):
+                d2 += ((F[1, c] - f_y[c]) / sc_y[c]) ** 2
+            for c in range(q):
+                v = -Eg[c] if mode == 1 else Eg[c]
+                d2 += ((v - f_y[k + c]) / sc_y[k + c]) ** 2
+            d2 = math.sqrt(d2 / N) / h0
+            h = _initial_step(d0, d1, d2, h0, order) * direction
+            if not (h == h):
+                fail = 1
+
+        # ---------------------------------------------------------------- the time loop
+        after_reject = False
+        i_step = 0
+        nc = 1
+        if not adaptive and hfix <= 0.0:
+            fail = 2
+        n_fixed = 0
+        if not adaptive and fail == 0:
+            n_fixed = max(1, int(math.ceil(abs(t1 - t0) / hfix - 1e-9)))
+        at_start = True
+        t_fail = t0
+        while fail == 0 and t1 != t0:
+            if nsteps + nrej >= max_steps:
+                fail = 3
+                break
+            if adaptive:
+                if abs(h) < 10.0 * _ulp(t, direction):
+                    fail = 2
+                    break
+                last = abs(h) >= abs(t1 - t)
+                if last:
+                    h = t1 - t
+            else:
+                last = nsteps + 1 >= n_fixed
+                h = (t1 if last else t0 + direction * hfix * (nsteps + 1)) - t
+            # stage 0 (kept across rejections: the field value; the chart part is rescaled)
+            if has_g:
+                _body_vertical(mode, G, gam, Gam0)
+            if not f0_ok:
+                _field(xi, Gam0, has_g, fidx, fval, z, F[0])
+                nfev += 1
+                f0_ok = True
+            for c in range(k):
+                hL[0, c] = h * F[0, c]
+            nc = 1
+            if kind == 3:
+                for p in range(m - 1):
+                    for j in range(1, r):
+                        Q[p, j] = 0.0
+            if group:
+                nc = _omega_alg(kind, skew, xi, widx, wval, Om, Q, nc, cvec, Oa)
+                for c in range(a):
+                    hK[0, c] = h * Oa[c]
+            ok = True
+            have_new = fsal or new_in  # stage s available after this trial
+            extended = False
+            rejected_now = False
+            i = 1
+            i_hi = s_eval
+            # stages 1 .. s_eval-1 of the trial step and, on demand below, s .. S-1 of an accepted one
+            while True:
+                while i < i_hi:
+                    for c in range(k):
+                        acc = 0.0
+                        for j in range(i):
+                            acc += A[i, j] * hL[j, c]
+                        Xi[c] = xi[c] + acc
+                    if group:
+                        for c in range(a):
+                            acc = 0.0
+                            for j in range(i):
+                                acc += A[i, j] * hK[j, c]
+                            Th[c] = acc
+                        if chart == 0 and skew and not extended and _alg_sq(kind, Th) >= _PI2:
+                            ok = False
+                        if has_g:
+                            _alg_act(kind, chart, skew, Th, -1.0, Gam0, Gam, W, vb, Q, nc, r, bufs)
+                    _field(Xi, Gam, has_g, fidx, fval, z, F[i])
+                    nfev += 1
+                    for c in range(k):
+                        hL[i, c] = h * F[i, c]
+                    if group:
+                        nc = _omega_alg(kind, skew, Xi, widx, wval, Om, Q, nc, cvec, Oa)
+                        _alg_dinv(kind, chart, skew, Th, Oa, h, hK[i], W, bern, nc, r, bufs)
+                    i += 1
+                if extended:  # the continuous extension's stages were just evaluated
+                    break
+                # ------------------------------------------------ the trial step's end and its error
+                for c in range(k):
+                    acc = 0.0
+                    for j in range(s):
+                        acc += bw[j] * hL[j, c]
+                    xi1[c] = xi[c] + acc
+                if group:
+                    for c in range(a):
+                        acc = 0.0
+                        for j in range(s):
+                            acc += bw[j] * hK[j, c]
+                        Th1[c] = acc
+                    if chart == 0 and skew and _alg_sq(kind, Th1) >= _PI2:
+                        ok = False
+                    _alg_update(kind, chart, skew, mode, G, Th1, G1, W, vb, Q, nc, r, bufs, PQ, PQ2)
+                finite = _finite(xi1) and _finite(G1)
+                nrm = 0.0
+                if adaptive:
+                    s5 = 0.0
+                    s3 = 0.0
+                    for e in range(ne):
+                        acc2 = 0.0
+                        for c in range(k):
+                            acc = 0.0
+                            for j in range(s_eval):
+                                acc += err[e, j] * hL[j, c]
+                            v = acc / _scale(xi[c], xi1[c], rtol, atol)
+                            acc2 += v * v
+                        if group:
+                            for c in range(a):
+                                acc = 0.0
+                                for j in range(s_eval):
+                                    acc += err[e, j] * hK[j, c]
+                                Ea[c] = acc
+                            _alg_state(kind, mode, G1, Ea, Eg, Q, nc, r, bufs, PQ, PQ2)
+                            for c in range(q):
+                                v = Eg[c] / _scale(G[c], G1[c], rtol, atol)
+                                acc2 += v * v
+                        if e == 0:
+                            s5 = acc2
+                        else:
+                            s3 = acc2
+                    nrm = _combine(s5, s3, N, ne == 2)
+                    if not ok or not finite:
+                        nrm = np.inf
+                    if not (nrm <= 1.0):
+                        rejected_now = True
+                        break
+                else:
+                    if not finite:  # the field broke down (a NaN chart argument too)
+                        fail = 1
+                        t_fail = t + h
+                        break
+                    if not ok:
+                        fail = 4
+                        t_fail = t
+                        break
+                # ------------------------------------------------ accepted: does its interior matter?
+                t_new = t1 if last else t + h
+                for e in range(E):
+                    acc = -ev_off[bi, e]
+                    for c in range(k):
+                        acc += ev_coef[bi, e, c] * xi1[c]
+                    for c in range(q):
+                        acc += ev_coef[bi, e, k + c] * G1[c]
+                    gnew[e] = acc
+                n_act = 0
+                for e in range(E):
+                    go = gold[e]
+                    gn = gnew[e]
+                    if go == 0.0 and at_start:  # starting on the surface is not a crossing
+                        continue
+                    up = go <= 0.0 and gn >= 0.0 and go != gn
+                    down = go >= 0.0 and gn <= 0.0 and go != gn
+                    d = ev_dir[e]
+                    if (up and d >= 0) or (down and d <= 0):
+                        act_e[n_act] = e
+                        n_act += 1
+                need = n_act > 0 or (ie < NT and direction * (t_eval[ie] - t_new) <= 0.0)
+                if need:  # the continuous extension: stage s (a copy for FSAL methods) and the extra stages
+                    extended = True
+                    if not have_new:
+                        i = s
+                    elif fsal:
+                        for c in range(k):
+                            F[s, c] = F[s - 1, c]
+                            hL[s, c] = hL[s - 1, c]
+                        for c in range(a):
+                            hK[s, c] = hK[s - 1, c]
+                        i = s + 1
+                    else:
+                        i = s + 1
+                    i_hi = S
+                    have_new = True
+                    continue
+                break
+            if fail != 0:
+                break
+            if rejected_now:
+                nrej += 1
+                h = h * _reject_factor(nrm, expo)
+                after_reject = True
+                continue
+            # ---------------------------------------------------- events, in time order
+            nsteps += 1
+            stop_th = 2.0
+            if n_act > 0:
+                for ia in range(n_act):
+                    e = act_e[ia]
+                    # Illinois on theta in [0, 1]: f(0) = gold, f(1) = gnew
+                    lo = 0.0
+                    hi = 1.0
+                    flo = gold[e]
+                    fhi = gnew[e]
+                    tlo = flo
+                    thi = fhi
+                    side = 0
+                    root = -1.0
+                    if flo == 0.0:
+                        root = 0.0
+                    elif fhi == 0.0:
+                        root = 1.0
+                    for _it in range(300):
+                        if root >= 0.0:
+                            break
+                        cth = (lo * fhi - hi * flo) / (fhi - flo)
+                        if not (lo < cth < hi):
+                            cth = 0.5 * (lo + hi)
+                        if cth <= lo or cth >= hi:
+                            break
+                        # the value at cth, on the continuous extension
+                        _dense_at(cth, dense, wts, xi, hL, hK, xit, Tht)
+                        fc = -ev_off[bi, e]
+                        for c in range(k):
+                            fc += ev_coef[bi, e, c] * xit[c]
+                        if ev_needG[e]:
+                            _alg_update(kind, chart, skew, mode, G, Tht, Gt, W, vb, Q, nc, r, bufs, PQ, PQ2)
+                            for c in range(q):
+                                fc += ev_coef[bi, e, k + c] * Gt[c]
+                        if fc == 0.0:
+                            root = cth
+                            break
+                        if (fc > 0.0) == (fhi > 0.0):
+                            hi = cth
+                            fhi = fc
+                            thi = fc
+                            if side == 1:
+                                flo *= 0.5
+                            side = 1
+                        else:
+                            lo = cth
+                            flo = fc
+                            tlo = fc
+                            if side == -1:
+                                fhi *= 0.5
+                            side = -1
+                        if abs(h) * (hi - lo) <= 4.0 * _ulp(t + cth * h, direction):
+                            break
+                    if root < 0.0:
+                        root = lo if abs(tlo) < abs(thi) else hi
+                    act_th[ia] = root
+                # insertion sort by theta (ties: event order)
+                for ia in range(1, n_act):
+                    j = ia
+                    while j > 0 and act_th[j - 1] > act_th[j]:
+                        tmp = act_th[j - 1]
+                        act_th[j - 1] = act_th[j]
+                        act_th[j] = tmp
+                        tmpe = act_e[j - 1]
+                        act_e[j - 1] = act_e[j]
+                        act_e[j] = tmpe
+                        j -= 1
+                for ia in range(n_act):
+                    e = act_e[ia]
+                    th_ = act_th[ia]
+                    if st == 1 and th_ > stop_th:
+                        break
+                    te = t_new if th_ == 1.0 else t + th_ * h
+                    if th_ == 1.0:
+                        for c in range(k):
+                            xit[c] = xi1[c]
+                        for c in range(q):
+                            Gt[c] = G1[c]
+                    else:
+                        _dense_at(th_, dense, wts, xi, hL, hK, xit, Tht)
+                        if group:
+                            _alg_update(kind, chart, skew, mode, G, Tht, Gt, W, vb, Q, nc, r, bufs, PQ, PQ2)
+                    cnt = ev_count[bi, e]
+                    if cnt < cap:
+                        ev_t[bi, e, cnt] = te
+                        for c in range(k):
+                            ev_xi[bi, e, cnt, c] = xit[c]
+                        for c in range(q):
+                            ev_G[bi, e, cnt, c] = Gt[c]
+                    ev_count[bi, e] = cnt + 1
+                    if ev_term[e] != 0 and st == 0:
+                        st = 1
+                        tst = te
+                        stop_th = th_
+            # ---------------------------------------------------- outputs (t_eval, record)
+            t_lim = tst if st == 1 else t_new
+            while ie < NT and direction * (t_eval[ie] - t_lim) <= 0.0:
+                te = t_eval[ie]
+                if te == t_new:
+                    for c in range(k):
+                        xi_out[ie, bi, c] = xi1[c]
+                    for c in range(q):
+                        G_out[ie, bi, c] = G1[c]
+                else:
+                    _dense_at((te - t) / h, dense, wts, xi, hL, hK, xit, Tht)
+                    for c in range(k):
+                        xi_out[ie, bi, c] = xit[c]
+                    if group:
+                        _alg_update(kind, chart, skew, mode, G, Tht, Gt, W, vb, Q, nc, r, bufs, PQ, PQ2)
+                        for c in range(q):
+                            G_out[ie, bi, c] = Gt[c]
+                ie += 1
+            if st == 1:
+                break
+            # ---------------------------------------------------- advance
+            t = t_new
+            i_step += 1
+            for c in range(k):
+                xi[c] = xi1[c]
+            for c in range(q):
+                G[c] = G1[c]
+            for e in range(E):
+                gold[e] = gnew[e]
+            if have_new:
+                for c in range(k):
+                    F[0, c] = F[s - 1, c] if fsal else F[s, c]
+                f0_ok = True
+            else:
+                f0_ok = False
+            at_start = False
+            if reproj and group and nsteps % renorm == 0:
+                f0_ok = False  # the state moved: stage 0 is evaluated again
+                if mode == 2:
+                    Gm = G.reshape((m, m))
+                    _polar_step(Gm, Wg[0], Wg[1])
+                elif mode == 1:
+                    acc = 0.0
+                    for c in range(q):
+                        acc += G[c] * G[c]
+                    nr = math.sqrt(acc)
+                    for c in range(q):
+                        G[c] = G[c] / nr
+            if record:
+                if rec_n == rec_cap:
+                    rec_cap *= 2
+                    t2 = np.zeros(rec_cap)
+                    x2 = np.zeros((rec_cap, k))
+                    g2 = np.zeros((rec_cap, q))
+                    t2[:rec_n] = t_rec[:rec_n]
+                    x2[:rec_n] = xi_rec[:rec_n]
+                    g2[:rec_n] = G_rec[:rec_n]
+                    t_rec, xi_rec, G_rec = t2, x2, g2
+                t_rec[rec_n] = t
+                xi_rec[rec_n, :] = xi
+                G_rec[rec_n, :] = G
+                rec_n += 1
+            if adaptive:
+                h = h * _accept_factor(nrm, expo, after_reject)
+                after_reject = False
+            if last:
+                tst = t1
+                break
+        if fail != 0:
+            st = -1
+            tst = t_fail if fail == 1 else t
+        status[bi] = st
+        t_stop[bi] = tst
+        failure[bi] = fail
+        nfev_o[bi] = nfev
+        steps_o[bi] = nsteps
+        rejected_o[bi] = nrej
+    return t_rec[:rec_n].copy(), xi_rec[:rec_n].copy(), G_rec[:rec_n].copy()
+
+
+def _solve_batch(*args) -> None:
+    """Every trajectory of the batch, in contiguous chunks over the cores: the jitted loop releases the GIL,
+    so threads run the chunks in parallel (no parfor to compile; no reduction across trajectories, so a
+    trajectory's numbers do not depend on the chunking)."""
+    B = args[2].shape[0]
+    workers = min(B, numba.config.NUMBA_NUM_THREADS, os.cpu_count() or 1)
+    if workers <= 1:
+        _solve_one(0, B, *args)
+        return
+    bounds = np.linspace(0, B, 4 * workers + 1).astype(np.int64)
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(workers) as pool:
+        list(pool.map(lambda c: _solve_one(int(bounds[c]), int(bounds[c + 1]), *args), range(len(bounds) - 1)))

@@ -1,0 +1,175 @@
+"""The Python side: which kind runs a model, whether a problem compiles, packing, and :func:`solve`."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ... import groups
+from ..compiled import (
+    CompilePlan,
+    NotCompilable,
+    compile_plan,
+)
+from ..problem import RENORM_EVERY, Problem, RawResult
+from .common import (
+    _I_NEV,
+    _NHEAD,
+    CHARTS,
+    EVENT_CAP,
+    KINDS,
+    LOWRANK_MIN_N,
+    MODES,
+)
+from .loop import _solve_batch, _solve_one
+
+
+# ====================================================================================== choosing the kind
+def kind_for(model, mode: str, chart: str | None) -> str | None:
+    """The group representation the kernel uses for ``model`` in ``mode`` (None for mode "none").
+
+    "so3" on so(3); "lowrank" for Fedorov–Kozlov models with n >= :data:`LOWRANK_MIN_N`; "dense" otherwise
+    (so(n), and general matrix algebras such as se(2), se(3)). so(4) runs as "dense".
+    """
+    if mode == "none":
+        return None
+    name = getattr(getattr(model, "algebra", None), "name", "")
+    n = getattr(model, "n", None)
+    if name == "so(3)":
+        return "so3"
+    if name.startswith("so(") and getattr(model, "fedorov_kozlov", False) and n is not None and n >= LOWRANK_MIN_N:
+        return "lowrank"
+    return "dense"
+
+
+# ====================================================================================== the wrapper
+def check(problem: Problem) -> None:
+    """Raise :class:`NotCompilable` with the reason when ``problem`` cannot run on the compiled kernel."""
+    _prepare(problem)
+
+
+def _prepare(problem: Problem):
+    if njit is None:
+        raise NotCompilable("numba is not installed (pip install 'liesuslov[fast]')")
+    if problem.events and problem.event_coef is None:
+        raise NotCompilable("an event is a user callable (not a LinearEvent): events are located on numpy")
+    mode = problem.mode
+    kind = problem.kind if mode != "none" else None
+    if kind == "so4":
+        kind = "dense"
+    if kind not in KINDS:
+        raise NotCompilable(f"the compiled kernel knows the kinds {sorted(k for k in KINDS if k)}, got {kind!r}")
+    if mode != "none" and problem.chart not in ("exp", "cayley"):
+        raise NotCompilable(f"the compiled kernel knows the charts exp and cayley, got {problem.chart!r}")
+    if kind in ("so3", "lowrank") and not problem.skew:
+        raise NotCompilable(f"the {kind!r} kind needs so(n)")
+    if kind == "so3" and problem.m != 3:
+        raise NotCompilable(f"the 'so3' kind needs 3×3 matrices, got m = {problem.m}")
+    cplan = compile_plan(problem.model, mode, problem.chart, skew=problem.skew, omega=kind != "lowrank")
+    if kind == "lowrank":
+        _check_fedorov_kozlov(problem.model)
+    return kind, cplan
+
+
+def _check_fedorov_kozlov(model) -> None:
+    n, k = int(model.n), int(model.k)
+    if not getattr(model, "fedorov_kozlov", False) or k != n - 1:
+        raise NotCompilable("the 'lowrank' kind needs a Fedorov–Kozlov model (Omega = u e_n^T - e_n u^T)")
+    x = np.random.default_rng(3).standard_normal((2, k))
+    Om = np.asarray(model.omega_matrix(x), dtype=float)
+    ref = np.zeros((2, n, n))
+    ref[:, :k, k] = x
+    ref[:, k, :k] = -x
+    if Om.shape != ref.shape or not np.array_equal(Om, ref):
+        raise NotCompilable("model.omega_matrix is not u e_n^T - e_n u^T: the 'lowrank' kind cannot run it")
+
+
+
+
+def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool):
+    plan = problem.plan
+    mode = MODES[problem.mode]
+    k, m, q = int(problem.k), int(problem.m), int(problem.q)
+    S, s = plan.S, plan.s
+    r = S + 1 if kind == "lowrank" else 0
+    a = {None: 0, "so3": 3, "dense": m * m, "lowrank": r * r}[kind]
+    terms = groups.bernoulli_coefficients(groups.dexpinv_terms(plan.order))[1:]
+    bern = np.array(terms, dtype=float).reshape(-1, 2)
+    E = 0 if problem.event_coef is None else int(problem.event_coef.shape[1])
+    nt = 0 if problem.t_eval is None else int(len(problem.t_eval))
+    head = np.zeros(_NHEAD, dtype=np.int64)
+    head[:] = (k, m, q, mode, CHARTS[problem.chart if mode else None], KINDS[kind], int(problem.skew),
+               int(bool(cplan.has_gamma) and mode != 0), s, S, plan.err.shape[0], plan.dense.shape[1],
+               int(plan.fsal), int(plan.new_in_step), int(problem.adaptive), int(problem.max_steps),
+               int(problem.reproject), max(RENORM_EVERY, m), bern.shape[0], cplan.field_value.size,
+               cplan.omega_value.size, E, int(plan.order), int(record), r, a, nt)
+    term = np.zeros(E, np.int64) if E == 0 else np.asarray(problem.event_terminal, np.int64).reshape(E)
+    dirn = np.zeros(E, np.int64) if E == 0 else np.asarray(problem.event_direction, np.int64).reshape(E)
+    iprm = np.concatenate([head, cplan.field_index.ravel(), cplan.omega_index.ravel(), term, dirn]).astype(np.int64)
+    fhead = np.array([problem.t0, problem.t1, abs(float(problem.h)), problem.rtol, problem.atol,
+                      plan.error_exponent], dtype=float)
+    fprm = np.concatenate([fhead, plan.A.ravel(), plan.b.ravel(), plan.err.ravel(), plan.dense.ravel(),
+                           bern.ravel(), cplan.field_value, cplan.omega_value]).astype(float)
+    return np.ascontiguousarray(iprm), np.ascontiguousarray(fprm)
+
+
+def solve(problem: Problem) -> RawResult:
+    """Integrate ``problem`` on the compiled kernel (see the module docstring); ``RawResult.backend == "numba"``."""
+    kind, cplan = _prepare(problem)
+    B, k, q = int(problem.B), int(problem.k), int(problem.q)
+    record = problem.t_eval is None
+    if record and B != 1:
+        raise ValueError("t_eval=None (record every step) needs a single trajectory")
+    iprm, fprm = _pack(problem, kind, cplan, record)
+    xi0 = np.ascontiguousarray(problem.xi0, dtype=float).reshape(B, k)
+    G0 = np.ascontiguousarray(problem.G0, dtype=float).reshape(B, q)
+    gamma = np.ascontiguousarray(problem.gamma, dtype=float).reshape(B, -1)
+    t_eval = np.zeros(0) if record else np.ascontiguousarray(problem.t_eval, dtype=float)
+    E = int(iprm[_I_NEV])
+    if E:
+        ev_coef = np.ascontiguousarray(problem.event_coef, dtype=float).reshape(B, E, k + q)
+        ev_off = np.ascontiguousarray(problem.event_offset, dtype=float).reshape(B, E)
+    else:
+        ev_coef, ev_off = np.zeros((B, 0, k + q)), np.zeros((B, 0))
+    cap = EVENT_CAP if E else 0
+    while True:
+        M = 0 if record else t_eval.shape[0]
+        xi_out = np.full((M, B, k), np.nan)
+        G_out = np.full((M, B, q), np.nan)
+        status = np.zeros(B, np.int64)
+        t_stop = np.zeros(B)
+        failure = np.zeros(B, np.int64)
+        nfev = np.zeros(B, np.int64)
+        steps = np.zeros(B, np.int64)
+        rejected = np.zeros(B, np.int64)
+        ev_count = np.zeros((B, E), np.int64)
+        ev_t = np.zeros((B, E, cap))
+        ev_xi = np.zeros((B, E, cap, k))
+        ev_G = np.zeros((B, E, cap, q))
+        args = (iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap, xi_out, G_out, status, t_stop,
+                failure, nfev, steps, rejected, ev_count, ev_t, ev_xi, ev_G)
+        if record:
+            t_rec, xi_rec, G_rec = _solve_one(0, 1, *args)
+        else:
+            _solve_batch(*args)
+        top = int(ev_count.max(initial=0))
+        if top <= cap:
+            break
+        cap = top  # deterministic: the same run again with room for every crossing
+    if record:
+        t_out, xi_out, G_out = t_rec, xi_rec[:, None, :], G_rec[:, None, :]
+    else:
+        t_out = t_eval.copy()
+    ev_lists = ([], [], [], [])
+    for e in range(E):
+        cnt = ev_count[:, e]
+        idx = np.repeat(np.arange(B, dtype=np.int64), cnt)
+        sel = np.concatenate([np.arange(c) for c in cnt]) if B else np.zeros(0, np.int64)
+        sel = sel.astype(np.int64)
+        ev_lists[0].append(ev_t[idx, e, sel])
+        ev_lists[1].append(idx)
+        ev_lists[2].append(ev_xi[idx, e, sel].reshape(idx.size, k))
+        ev_lists[3].append(ev_G[idx, e, sel].reshape(idx.size, q))
+    return RawResult(t=t_out, xi=xi_out, G=G_out, status=status, t_stop=t_stop, failure=failure, nfev=nfev,
+                     steps=steps, rejected=rejected, event_t=ev_lists[0], event_index=ev_lists[1],
+                     event_xi=ev_lists[2], event_G=ev_lists[3], backend="numba")
