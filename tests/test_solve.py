@@ -285,3 +285,32 @@ def test_events_bad_input():
         ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 1.0), method="rkmk45", events=ev)
     with pytest.raises(ValueError, match="Gamma"):
         ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 1.0), method="rkmk45", events=LinearEvent(Gamma=[0, 0, 1.0]))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_gamma_n_crossings_against_the_klebsh_tisserand_closed_form(backend):
+    """Gamma_n = 0 crossings of a Klebsh–Tisserand body (n = 3, past the tori condition: Gamma_n changes sign)
+    located by the event machinery, against the zeros of the closed form's Gamma_n(t) (its tau-solution,
+    ``analytic.KlebshTisserandMotion``), found by brentq on a fine grid."""
+    from .test_hard_cases import fk_omega, single_angle_state
+
+    I, B = np.array([1.0, 1.5, 2.5]), np.array([4.0, 3.0, 1.0])
+    case = ls.cases.klebsh_tisserand(I, B)
+    u0, G0 = single_angle_state(I, B, -1e-2)
+    km = ls.analytic.KlebshTisserandMotion(u0, G0, I, B, allow_crossing=True)
+    T = 12.0
+
+    def gamma_n(t):
+        return float(km.state(np.array([t]))[1][0, -1])
+
+    ts = np.linspace(0.0, T, 2401)
+    gn = km.state(ts)[1][:, -1]
+    zeros = np.array([brentq(gamma_n, a, b, xtol=1e-14) for a, b, fa, fb in zip(ts[:-1], ts[1:], gn[:-1], gn[1:],
+                                                                                  strict=True) if fa * fb < 0])
+    assert zeros.size >= 2
+    sol = ls.integrate(case.system, fk_omega(u0), (0.0, T), Gamma0=G0, method="rkmk853", rtol=1e-12, atol=1e-14,
+                       events=gamma_crossing(3), backend=backend)
+    rec = sol.events[0]
+    assert rec.t.size == zeros.size
+    np.testing.assert_allclose(rec.t, zeros, rtol=0, atol=1e-8)
+    assert np.max(np.abs(rec.Gamma[:, -1])) < 1e-13
