@@ -50,7 +50,7 @@ def make_problem(model, xi0, *, G0=None, gamma=None, mode="none", chart="exp", k
                    gamma=np.ascontiguousarray(gamma), t0=float(t_span[0]), t1=float(t_span[1]),
                    adaptive=meth.adaptive, h=float(h), rtol=rtol, atol=atol, max_steps=max_steps,
                    t_eval=None if t_eval is None else np.asarray(t_eval, float), events=[None] * E, event_linear=linear,
-                   event_coef=event_coef, event_offset=event_offset, event_terminal=event_terminal,
+                   event_terminal=event_terminal,
                    event_direction=event_direction, reproject=reproject)
 
 
@@ -140,7 +140,7 @@ def test_kinds_and_check():
     assert kernel.kind_for(fk, "g", "cayley") == "lowrank"
     p = make_problem(so3, np.zeros((1, so3.k)), G0=np.eye(3).ravel(), mode="g", event_coef=np.zeros((1, 1, 11)),
                      event_offset=np.zeros((1, 1)))
-    p.event_coef = None
+    p.event_linear = [None]  # a user callable: no linear form
     with pytest.raises(kernel.NotCompilable, match="callable"):
         kernel.check(p)
     assert issubclass(kernel.NotCompilable, ValueError)

@@ -314,3 +314,13 @@ def test_gamma_n_crossings_against_the_klebsh_tisserand_closed_form(backend):
     assert rec.t.size == zeros.size
     np.testing.assert_allclose(rec.t, zeros, rtol=0, atol=1e-8)
     assert np.max(np.abs(rec.Gamma[:, -1])) < 1e-13
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_progress_bar_counts_trajectories(backend, capsys):
+    pytest.importorskip("tqdm")
+    system = free_body()
+    w = np.array([[0.3, 1.0, 0.4], [0.5, 0.6, -0.4], [0.1, 0.2, 0.3]])
+    sol = ls.integrate(system, w, (0.0, 1.0), method="rkmk45", progress=True, backend=backend)
+    assert sol.success
+    assert "3/3" in capsys.readouterr().err

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["SAFETY", "MIN_FACTOR", "MAX_FACTOR", "scale", "combine", "accept_factor", "reject_factor",
-           "initial_step"]
+           "initial_step", "probe_step"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 # Added under the square root of DOP853's combination so that S5 = S3 = 0 gives 0, not 0/0 (it changes

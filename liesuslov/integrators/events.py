@@ -19,7 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["EventRecord", "LinearEvent", "coordinate_plane", "gamma_crossing", "return_plane", "event_flags"]
+from .._validation import as_float_array, unit_vectors
+from ..algebra.elements import omega_coordinates
+
+__all__ = ["EventRecord", "LinearEvent", "coordinate_plane", "gamma_crossing", "return_plane", "event_flags",
+           "initial_velocity"]
 
 
 @dataclass
@@ -199,8 +203,6 @@ def return_plane(system, Omega0, Gamma0=None, *, terminal: bool = False, directi
     Omega0 : array_like, shape (..., n, n) or (..., d)
     Gamma0 : array_like, shape (..., n), optional
     """
-    from .integrate import initial_velocity
-
     omega0, Gamma0_, domega, dGamma = initial_velocity(system, Omega0, Gamma0)
     offset = np.sum(domega * omega0, axis=-1)
     kwargs = {"omega": domega}
@@ -213,3 +215,29 @@ def return_plane(system, Omega0, Gamma0=None, *, terminal: bool = False, directi
                          "through it is transverse to the flow")
     kwargs = {key: v / scale[..., None] for key, v in kwargs.items()}
     return LinearEvent(**kwargs, offset=offset / scale, terminal=terminal, direction=direction)
+
+
+def initial_velocity(system, Omega0, Gamma0=None):
+    """``(omega0 (..., d), Gamma0 (..., n) or None, d omega/dt (..., d), d Gamma/dt (..., n) or None)`` at t0.
+
+    The reduced velocity of the smallest model of ``system`` (``d Gamma / dt = -Omega Gamma``); used by
+    :func:`return_plane`.
+    """
+    model = system.model(gamma=True if Gamma0 is not None else None)
+    x0 = omega_coordinates(model.algebra, Omega0, "Omega0")
+    G0 = None
+    if model.has_gamma:
+        if Gamma0 is None:
+            raise ValueError("Gamma0 is required: the potential (or gyroscopic term) depends on Gamma")
+        G0 = unit_vectors(as_float_array(Gamma0, "Gamma0", ndim_min=1, tail=(model.n,)), "Gamma0")
+        lead = np.broadcast_shapes(x0.shape[:-1], G0.shape[:-1])
+        x0 = np.broadcast_to(x0, lead + x0.shape[-1:])
+        G0 = np.broadcast_to(G0, lead + G0.shape[-1:])
+    xi = model.xi_from_coords(x0)
+    dxi = model.xi_dot(xi, G0)
+    domega = model.omega_coords(dxi)
+    dG = None
+    if G0 is not None:
+        Om = model.omega_matrix(xi)
+        dG = -np.matmul(Om, G0[..., None])[..., 0]
+    return x0, G0, domega, dG

@@ -22,7 +22,7 @@ from .problem import FAILURES, Problem, RawResult
 from .solution import Solution
 from .tableaux import get_tableau
 
-__all__ = ["integrate", "METHODS", "Method", "BACKENDS", "initial_velocity"]
+__all__ = ["integrate", "METHODS", "Method", "BACKENDS"]
 
 
 @dataclass(frozen=True)
@@ -293,9 +293,6 @@ def _add_events(P: Problem, events, batch_shape) -> None:
         off = np.broadcast_to(e.offset, batch_shape)
         lin.append((np.ascontiguousarray(coef.reshape(P.B, -1)), np.ascontiguousarray(off.reshape(P.B), dtype=float)))
     P.event_linear = lin
-    if all(x is not None for x in lin):
-        P.event_coef = np.ascontiguousarray(np.stack([c for c, _ in lin], axis=1))
-        P.event_offset = np.ascontiguousarray(np.stack([o for _, o in lin], axis=1))
 
 
 def _choose_solver(P: Problem, backend: str):
@@ -322,14 +319,22 @@ def _choose_solver(P: Problem, backend: str):
 
 
 def _run(solver, P: Problem, progress: bool) -> RawResult:
+    """``solver.solve(P)``; with ``progress`` a bar over the trajectories (the numpy solver reports each one
+    as it ends; the compiled batch, which has no Python per trajectory, reports them all at its end)."""
     if not progress:
         return solver.solve(P)
     try:
         from tqdm.auto import tqdm
     except ImportError as exc:
         raise ValueError("progress=True needs tqdm: pip install 'liesuslov[progress]'") from exc
-    with tqdm(total=1, unit="batch", leave=False):
-        return solver.solve(P)
+    from . import solve_numpy
+
+    with tqdm(total=P.B, unit="trajectory", leave=False, mininterval=0.0) as bar:
+        if solver is solve_numpy:
+            return solver.solve(P, done=bar.update)
+        raw = solver.solve(P)
+        bar.update(P.B)
+        return raw
 
 
 def _solution(raw: RawResult, P: Problem, batch_shape, method, chart, wall, reason) -> Solution:
@@ -419,32 +424,6 @@ class _Replay:
                        stats=sol.stats, status=sol.status, message=sol.message, n=sol.n,
                        algebra_name=sol.algebra_name)
         return out
-
-
-def initial_velocity(system, Omega0, Gamma0=None):
-    """``(omega0 (..., d), Gamma0 (..., n) or None, d omega/dt (..., d), d Gamma/dt (..., n) or None)`` at t0.
-
-    The reduced velocity of the smallest model of ``system`` (``d Gamma / dt = -Omega Gamma``); used by
-    :func:`~.events.return_plane`.
-    """
-    model = system.model(gamma=True if Gamma0 is not None else None)
-    x0 = omega_coordinates(model.algebra, Omega0, "Omega0")
-    G0 = None
-    if model.has_gamma:
-        if Gamma0 is None:
-            raise ValueError("Gamma0 is required: the potential (or gyroscopic term) depends on Gamma")
-        G0 = unit_vectors(as_float_array(Gamma0, "Gamma0", ndim_min=1, tail=(model.n,)), "Gamma0")
-        lead = np.broadcast_shapes(x0.shape[:-1], G0.shape[:-1])
-        x0 = np.broadcast_to(x0, lead + x0.shape[-1:])
-        G0 = np.broadcast_to(G0, lead + G0.shape[-1:])
-    xi = model.xi_from_coords(x0)
-    dxi = model.xi_dot(xi, G0)
-    domega = model.omega_coords(dxi)
-    dG = None
-    if G0 is not None:
-        Om = model.omega_matrix(xi)
-        dG = -np.matmul(Om, G0[..., None])[..., 0]
-    return x0, G0, domega, dG
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -11,10 +11,10 @@ Stages are numbered::
     s+1 … S-1    the extra stages of a continuous extension (DOP853's three), evaluated only for an
                  accepted step whose interior is asked for (t_eval, events, dense output).
 
-Every stage stores ``h L_j`` (the field, scaled by the step) and ``h K_j`` (the chart velocity), so a
-stage's argument is the constant combination ``Xi_i = xi + sum_j A[i, j] (h L_j)``, ``Theta_i = sum_j
-A[i, j] (h K_j)``: per trajectory, with its own h, and summed term by term in the same order alone or in a
-batch (a trajectory's numbers do not depend on its batch mates).
+A stage's argument is ``Xi_i = xi + h sum_j A[i, j] L_j``, ``Theta_i = h sum_j A[i, j] K_j`` (L the field, K the
+chart velocity): the compiled kernel stores ``h L_j``, ``h K_j`` and sums term by term; the numpy stepper
+multiplies the rows ``(1, h A[i, :i])`` into its stage buffer — the same method, agreeing to rounding. Both
+take one trajectory at a time, so a trajectory's numbers do not depend on its batch mates.
 
 Continuous extension: ``xi(t + theta h) = xi + sum_j b_j(theta) (h L_j)`` and ``Theta(theta) = sum_j
 b_j(theta) (h K_j)`` with ``b(theta) = dense @ [theta, …, theta^p]``; then ``g = g0 phi(Theta(theta))`` and

@@ -82,10 +82,6 @@ class Problem:
         The user's event functions (numpy solver).
     event_linear : list over events of ``(coef (B, k + q), offset (B,))`` or None
         The linear form of each :class:`~.events.LinearEvent` (None for any other callable).
-    event_coef : (B, E, k + q) or None
-        Every event is linear in the state: ``value = event_coef[b, e] . (xi, G) - event_offset[b, e]``
-        (what the compiled kernel evaluates). None when some event is not a :class:`~.events.LinearEvent`.
-    event_offset : (B, E)
     event_terminal : (E,) int64 (0/1)
     event_direction : (E,) int64 (-1, 0, +1)
     reproject : bool
@@ -115,8 +111,6 @@ class Problem:
     t_eval: np.ndarray | None
     events: list = field(default_factory=list)
     event_linear: list = field(default_factory=list)
-    event_coef: np.ndarray | None = None
-    event_offset: np.ndarray | None = None
     event_terminal: np.ndarray | None = None
     event_direction: np.ndarray | None = None
     reproject: bool = True
@@ -174,6 +168,21 @@ class Problem:
     @property
     def n_events(self) -> int:
         return len(self.events)
+
+    @property
+    def event_coef(self) -> np.ndarray | None:
+        """(B, E, k + q): every event linear in the state, ``value = coef[b, e] . (xi, G) - offset[b, e]`` (what
+        the compiled kernel evaluates); None without events or when one is not a :class:`~.events.LinearEvent`."""
+        if not self.event_linear or any(x is None for x in self.event_linear):
+            return None
+        return np.ascontiguousarray(np.stack([c for c, _ in self.event_linear], axis=1))
+
+    @property
+    def event_offset(self) -> np.ndarray | None:
+        """(B, E) offsets of :attr:`event_coef` (None when it is None)."""
+        if self.event_coef is None:
+            return None
+        return np.ascontiguousarray(np.stack([o for _, o in self.event_linear], axis=1))
 
 
 @dataclass(eq=False)

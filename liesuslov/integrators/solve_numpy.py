@@ -25,8 +25,11 @@ from .rkmk import RKMKStepper
 __all__ = ["solve"]
 
 
-def solve(problem: Problem) -> RawResult:
-    """Integrate every trajectory of ``problem`` on numpy (see :class:`~.problem.RawResult`)."""
+def solve(problem: Problem, done=None) -> RawResult:
+    """Integrate every trajectory of ``problem`` on numpy (see :class:`~.problem.RawResult`).
+
+    ``done(1)``, if given, is called as each trajectory ends (a progress bar's ``update``).
+    """
     P = problem
     B, k, q = P.B, P.k, P.q
     t_out = P.t_eval
@@ -39,9 +42,8 @@ def solve(problem: Problem) -> RawResult:
     t_stop = np.full(B, P.t1)
     counts = np.zeros((3, B), np.int64)
     ev = [[[] for _ in range(B)] for _ in range(P.n_events)]
-    stepper = RKMKStepper(P.model, P.plan, P.chart, P.mode, 1, kind=P.kind if P.kind in ("so3", "so4", "lowrank",
-                                                                                         "dense", "coords") else None,
-                          rtol=P.rtol, atol=P.atol)
+    # the kernel's kind when the problem was built for it (tests compare the two on one Problem), else the default
+    stepper = RKMKStepper(P.model, P.plan, P.chart, P.mode, 1, kind=P.kind, rtol=P.rtol, atol=P.atol)
     steps_t, steps_xi, steps_G = [], [], []
     with np.errstate(all="ignore"):  # a diverging step is detected (status -1), not warned about
         for b in range(B):
@@ -51,6 +53,8 @@ def solve(problem: Problem) -> RawResult:
             run = _Trajectory(P, b, stepper, out, events)
             status[b], failure[b], t_stop[b] = run.run()
             counts[:, b] = (run.nfev, run.steps, run.rejected)
+            if done is not None:
+                done(1)
     if rec_all:
         t_out = np.asarray(steps_t, dtype=float)
         xi_out = np.asarray(steps_xi, dtype=float).reshape(t_out.size, 1, k)
