@@ -102,7 +102,8 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     max_steps : int
         Per trajectory (accepted and rejected); a trajectory reaching it fails (status -1).
     progress : bool
-        Show a progress bar over the trajectories (numpy solver; needs tqdm).
+        Show a progress bar over the trajectories (needs tqdm): the numpy solver advances it as each
+        trajectory ends, the compiled batch at its end.
     backend : {"auto", "numpy", "numba"}
         "auto" runs the compiled kernel (``liesuslov[fast]``) when numba is installed and the problem
         qualifies (a polynomial field — built-in potentials, gyroscopic term; a group part on so(n);

@@ -192,19 +192,15 @@ class RKMKStepper:
     def _error(self, h, xi, xi1, G, G1):
         """Scaled sums of squares of the estimates in the state (see :mod:`.control`)."""
         sums = []
+        sc = control.scale(xi, xi1, self.rtol, self.atol)
+        scG = None if self.kern is None else control.scale(G, G1, self.rtol, self.atol)
         for w in self.plan.err:
             e = self._combine(w, h, base=0.0)
-            ex = self._xv(e[: self.nk])
-            sc = control.scale(xi, xi1, self.rtol, self.atol)
-            s = np.sum((ex / sc) ** 2, axis=-1)
+            s = np.sum((self._xv(e[: self.nk]) / sc) ** 2, axis=-1)
             if self.kern is not None:
-                E = self.kern.matrix(e[self.nk:])  # (B, m, m): the chart estimate
-                if self.mode == "g":
-                    eg = np.matmul(G1, E)
-                    s = s + np.sum((eg / control.scale(G, G1, self.rtol, self.atol)) ** 2, axis=(-2, -1))
-                else:
-                    eg = np.matmul(E, G1[..., None])[..., 0]
-                    s = s + np.sum((eg / control.scale(G, G1, self.rtol, self.atol)) ** 2, axis=-1)
+                E = self.kern.matrix(e[self.nk:])  # (B, m, m): the chart estimate, carried to the state
+                eg = np.matmul(G1, E) if self.mode == "g" else np.matmul(E, G1[..., None])[..., 0]
+                s = s + np.sum((eg / scG) ** 2, axis=tuple(range(1, eg.ndim)))
             sums.append(s)
         return sums[0], (sums[1] if len(sums) > 1 else sums[0])
 
