@@ -80,13 +80,14 @@ def fk_system(n, rng):
 
 
 def scenes():
-    """(name, model, kind) for every kind: so3, dense n = 4 and 5, lowrank n = 8."""
+    """(name, model, kind) for every kind: so3, dense n = 4 and 5, lowrank n = 8, so4 (the dense4 model)."""
     rng = np.random.default_rng(1)
     out = [("so3", ls.cases.gyroscopic3([1.0, 2.0, 2.5], 0.7, ls.QuadraticPotential([1.0, 2.0, 0.5])).system
             .model(gamma=True), "so3")]
     for n in (4, 5):
         out.append((f"dense{n}", general_system(n, rng).model(gamma=True), "dense"))
     out.append(("lowrank8", fk_system(8, rng).model(gamma=False), "lowrank"))
+    out.append(("so4", out[1][1], "so4"))
     return out
 
 
@@ -135,7 +136,11 @@ def test_kinds_and_check():
     so3 = SCENES[0][1]
     assert kernel.kind_for(so3, "g", "exp") == "so3"
     assert kernel.kind_for(so3, "none", None) is None
-    assert kernel.kind_for(SCENES[1][1], "g", "exp") == "dense"
+    assert kernel.kind_for(SCENES[1][1], "g", "exp") == "so4"
+    assert kernel.kind_for(SCENES[2][1], "g", "exp") == "dense"
+    with pytest.raises(kernel.NotCompilable, match="4×4"):
+        kernel.check(make_problem(SCENES[2][1], np.zeros((1, SCENES[2][1].k)), G0=np.eye(5).ravel(), mode="g",
+                                  kind="so4"))
     fk = fk_system(16, rng).model(gamma=False)
     assert kernel.kind_for(fk, "g", "cayley") == "lowrank"
     p = make_problem(so3, np.zeros((1, so3.k)), G0=np.eye(3).ravel(), mode="g", event_coef=np.zeros((1, 1, 11)),
@@ -298,10 +303,10 @@ def test_one_step_structure(scene, chart):
         assert np.abs(np.linalg.norm(res.G[0], axis=1) - 1.0).max() <= 10 * EPS
 
 
-@pytest.mark.parametrize("kind", ["so3", "dense", "lowrank"])
+@pytest.mark.parametrize("kind", ["so3", "dense", "lowrank", "so4"])
 def test_structure_without_reprojection(kind):
     rng = np.random.default_rng(4)
-    model = {"so3": SCENES[0][1], "dense": SCENES[1][1], "lowrank": SCENES[3][1]}[kind]
+    model = {"so3": SCENES[0][1], "dense": SCENES[1][1], "lowrank": SCENES[3][1], "so4": SCENES[4][1]}[kind]
     n = model.n
     N = 10_000
     xi = rng.normal(size=(1, model.k))
@@ -338,6 +343,54 @@ def test_chart_domain():
     ref = kernel.solve(make_problem(so3, xi, method="rkmk45", **base))
     np.testing.assert_allclose(res.G[-1], ref.G[-1], atol=1e-6)
     del model
+
+
+def klebsh_tisserand():
+    """The Klebsh–Tisserand body in SO(4) (Fedorov–Kozlov constraints), the benchmark's scene."""
+    return ls.cases.klebsh_tisserand(np.array([1.0, 1.5, 2.0, 0.5]), np.array([4.0, 3.0, 2.5, 1.0])).system.model(
+        gamma=True)
+
+
+@pytest.mark.parametrize("mode", ["g", "gamma"])
+@pytest.mark.parametrize("chart", ["exp", "cayley"])
+@pytest.mark.parametrize("method", ["rkmk4", "rkmk45", "rkmk853"])
+def test_so4_agrees_with_the_numpy_solver(method, chart, mode):
+    """The so4 kind (closed forms on the pair (p, q)) runs the numpy solver's so(4) kernel to rounding, and the
+    dense kind's matrix algorithms (the same truncated dexp⁻¹ series) to rounding too."""
+    model = klebsh_tisserand()
+    assert kernel.kind_for(model, mode, chart) == "so4"
+    rng = np.random.default_rng(12)
+    B = 2
+    xi = rng.normal(size=(B, model.k))
+    gamma = unit(rng, B, 4)
+    G = rotations(rng, B, 4).reshape(B, -1) if mode == "g" else gamma
+    adaptive = METHODS[method].adaptive
+    kw = dict(G0=G, gamma=gamma if mode == "g" else None, mode=mode, chart=chart, method=method,
+              h=0.0 if adaptive else 0.01, t_span=(0.0, 3.0), t_eval=[0.0, 0.7, 2.2, 3.0], rtol=1e-10, atol=1e-12)
+    p = make_problem(model, xi, kind="so4", **kw)
+    res = kernel.solve(p)
+    assert np.all(res.status == 0) and res.steps.min() >= 10
+    assert_same_run(res, numpy_solve(p), atol=1e-13)
+    assert_same_run(res, kernel.solve(make_problem(model, xi, kind="dense", **kw)), atol=1e-13)
+
+
+def test_so4_chart_domain_agrees_with_numpy():
+    """A step with |h Omega|_F / sqrt 2 = 2 pi: the fixed step fails with code 4 at the start, the adaptive one
+    is rejected and finishes — with the numpy solver's counts."""
+    model = klebsh_tisserand()
+    xi = np.array([[0.3, -0.2, 0.25]])
+    w = np.sqrt(0.5 * np.sum(model.omega_matrix(xi)[0] ** 2))
+    h = 2 * np.pi / w
+    base = dict(G0=np.eye(4).ravel(), gamma=np.array([0.2, -0.4, 0.4, 0.8]), mode="g", kind="so4",
+                t_span=(0.0, 3 * h), t_eval=[0.0, 3 * h])
+    p = make_problem(model, xi, method="rkmk4", h=h, **base)
+    res = kernel.solve(p)
+    assert res.status[0] == -1 and res.failure[0] == 4 and res.t_stop[0] == 0.0
+    assert_same_run(res, numpy_solve(p))
+    p = make_problem(model, xi, method="rkmk45", h=h, **base)
+    res = kernel.solve(p)
+    assert res.status[0] == 0 and res.rejected[0] >= 1
+    assert_same_run(res, numpy_solve(p), atol=1e-13)
 
 
 def test_record_every_step_and_backward():

@@ -130,6 +130,8 @@ from .so4 import (  # noqa: F401
     _SO4_EXP_MIN_BATCH,
     _cos_sinc,
     _so4_cayley_coefficients,
+    _so4_dcayinv_c,
+    _so4_dexpinv_c,
     _so4_exp_apply_c,
     _so4_exp_coefficients,
     _so4_exp_mat_c,

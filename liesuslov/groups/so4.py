@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from .common import _SINC_TAYLOR, _Coef
-from .so3 import _rodrigues_fast, _sq, _stack, _vec_c
+from .so3 import _rodrigues_fast, _so3_lin_c, _sq, _stack, _vec_c
 
 # ---------------------------------------------------------------------------- so(4) = so(3) ⊕ so(3) by components
 # The component forms cost ~100 numpy calls on a batch (each over the batch, ~40 µs in all), against ~20
@@ -132,6 +132,34 @@ def _so4_exp_mat_c(e: tuple, p: tuple, q: tuple) -> tuple:
     """The 16 entries of ``exp X = cp cq I + sp cq P + cp sq Q + sp sq PQ``."""
     cp, sp, cq, sq = e
     return _so4_mat_c((cp * cq, sp * cq, cp * sq, sp * sq), p, q)
+
+
+def _so4_dexpinv_c(half: float, cp: _Coef, cq: _Coef, a2: _Coef, b2: _Coef, p: tuple, q: tuple, ap: tuple,
+                   aq: tuple) -> tuple:
+    """The 6 components of the truncated ``dexp⁻¹_{−X}(A)`` (right side) on the pairs ``X ↔ (p, q)``, ``A ↔ (ap, aq)``.
+
+    ``ad_P`` acts on the self-dual factor as ``ϑ ×`` with ``ϑ = −2p`` (``ϑ = 2q`` on the other factor), so
+    the series is the so(3) one of :func:`~.dexp._dexpinv_so3_series` on each factor:
+    ``a + half ϑ × a + C(|ϑ|²) ϑ × (ϑ × a)``, with ``a2 = |p|²``, ``b2 = |q|²``, ``cp = C(4 a2)``,
+    ``cq = C(4 b2)`` (:func:`~.dexp._dexpinv_so3_poly`).
+    """
+    return (_so3_lin_c(1.0 - 4.0 * cp * a2, -2.0 * half, 4.0 * cp, p, ap)
+            + _so3_lin_c(1.0 - 4.0 * cq * b2, 2.0 * half, 4.0 * cq, q, aq))
+
+
+def _so4_dcayinv_c(a2: _Coef, b2: _Coef, p: tuple, q: tuple, ap: tuple, aq: tuple) -> tuple:
+    """The 6 components of the exact ``dcay⁻¹_{−X}(A) = (I + X/2) A (I − X/2)`` on the pairs (``a2 = |p|²``,
+    ``b2 = |q|²``).
+
+    ``(I + X/2) A (I − X/2) = A + ½[X, A] − ¼ XAX`` with ``[X, A] ↔ (−2 p × ap, 2 q × aq)`` and
+    ``XAX ↔ ((a² − b²) ap − 2 σ p, (b² − a²) aq − 2 σ q)``, ``σ = p·ap + q·aq``.
+    """
+    s = 0.5 * (p[0] * ap[0] + p[1] * ap[1] + p[2] * ap[2] + q[0] * aq[0] + q[1] * aq[1] + q[2] * aq[2])
+    d = 0.25 * (a2 - b2)
+    up = _so3_lin_c(1.0 - d, -1.0, 0.0, p, ap)
+    uq = _so3_lin_c(1.0 + d, 1.0, 0.0, q, aq)
+    return (up[0] + s * p[0], up[1] + s * p[1], up[2] + s * p[2], uq[0] + s * q[0], uq[1] + s * q[1],
+            uq[2] + s * q[2])
 
 
 def so4_split(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

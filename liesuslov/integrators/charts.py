@@ -65,6 +65,8 @@ from ..groups import (
     _so3_lin_c,
     _so3_mat,
     _so4_cayley_coefficients,
+    _so4_dcayinv_c,
+    _so4_dexpinv_c,
     _so4_exp_apply_c,
     _so4_exp_coefficients,
     _so4_exp_mat_c,
@@ -572,20 +574,12 @@ class _So4Kernel(_ComponentKernel):
         q0, q1, q2 = q
         a2 = p0 * p0 + p1 * p1 + p2 * p2
         b2 = q0 * q0 + q1 * q1 + q2 * q2
-        if self.exp:
-            # ad_P ↔ ϑ × with ϑ = −2p (and ϑ = 2q on the other factor): a + h ϑ × a + C(|ϑ|²) ϑ × (ϑ × a)
-            h = self.half
+        if self.exp:  # the truncated series on each factor
             cp = _dexpinv_so3_poly(4.0 * a2, self.poly)
             cq = _dexpinv_so3_poly(4.0 * b2, self.poly)
-            vals = (_so3_lin_c(1.0 - 4.0 * cp * a2, -2.0 * h, 4.0 * cp, p, ap)
-                    + _so3_lin_c(1.0 - 4.0 * cq * b2, 2.0 * h, 4.0 * cq, q, aq))
-        else:
-            # (I + Θ/2) Ω (I − Θ/2) = Ω + ½[Θ, Ω] − ¼ ΘΩΘ, ΘΩΘ ↔ ((a² − b²) a_p − 2 s p, (b² − a²) a_q − 2 s q)
-            s = 0.5 * (p0 * ap[0] + p1 * ap[1] + p2 * ap[2] + q0 * aq[0] + q1 * aq[1] + q2 * aq[2])
-            d = 0.25 * (a2 - b2)
-            up = _so3_lin_c(1.0 - d, -1.0, 0.0, p, ap)
-            uq = _so3_lin_c(1.0 + d, 1.0, 0.0, q, aq)
-            vals = (up[0] + s * p0, up[1] + s * p1, up[2] + s * p2, uq[0] + s * q0, uq[1] + s * q1, uq[2] + s * q2)
+            vals = _so4_dexpinv_c(self.half, cp, cq, a2, b2, p, q, ap, aq)
+        else:  # exact: (I + Θ/2) Ω (I − Θ/2)
+            vals = _so4_dcayinv_c(a2, b2, p, q, ap, aq)
         if self.single:
             slot[:] = vals
         else:

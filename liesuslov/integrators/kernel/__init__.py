@@ -13,8 +13,9 @@ compiles one specialisation (~66 s CPU under load; the one int64 and one float64
 every scene, so no other scene compiles again); later processes load it from the cache (< 1 s). RKMK4 with
 reconstruction, h = 0.005: so(3) ~1.4 µs per step (~5x a plain loop hard-coded for that method: the
 kernel's loops run over run-time sizes — k, stages, layouts — that the plain loop has as constants), a
-batch of 10^4 ~0.7 µs per trajectory-step on both cores; so(4) (dense kind) ~4.8 µs per step;
-Fedorov–Kozlov SO(256) (low-rank kind) ~0.55 ms per step.
+batch of 10^4 ~0.7 µs per trajectory-step on both cores; so(4) ~1.4 µs per step (so4 kind, the
+Klebsh–Tisserand scene of the benchmark; the dense kind ~4.3 µs, the plain loop ~0.3 µs); Fedorov–Kozlov
+SO(256) (low-rank kind) ~0.55 ms per step.
 
 What is compiled
 ----------------
@@ -23,6 +24,10 @@ What is compiled
 * the group part in one of the kinds of :func:`kind_for`:
 
   - ``"so3"``: rotation vectors, closed forms (Rodrigues, the exact so(3) dexp⁻¹ and Cayley maps);
+  - ``"so4"``: so(4) = so(3) ⊕ so(3) as the pair (p, q) (:func:`liesuslov.groups.so4_split`), the closed
+    forms of :mod:`liesuslov.groups.so4` (exp as two Rodrigues factors, Cayley by four coefficients, dexp⁻¹
+    the truncated so(3) series on each factor, dcay⁻¹ exact), as the numpy solver's so(4) kernel
+    (:mod:`.so4`);
   - ``"dense"``: m×m matrices — so(n) (skew brackets, Padé scaling and squaring with the skew norm bound
     and a Newton–Schulz polish, Cayley by LU) or a general matrix algebra (se(2), se(3): full brackets,
     Padé with the 1-norm, Cayley by LU); dexp⁻¹ is the series ``Σ_{k < p-1} (B_k/k!) ad^k`` with the
@@ -31,12 +36,14 @@ What is compiled
     per-step orthonormal basis Q (n × r, r <= S + 1) built stage by stage by Gram–Schmidt (twice), as
     :class:`~.charts._LowRankKernel`: O(n r + r³) per stage, O(n² r) per step.
 
-Layouts of an algebra element (a stage's ``h K_j``): so3 3 numbers ``(X21, X02, X10)``, dense m² (row
-major), lowrank r² (the r×r coordinates M in the step's basis).
+Layouts of an algebra element (a stage's ``h K_j``): so3 3 numbers ``(X21, X02, X10)``, so4 6 numbers
+``(p, q)``, dense m² (row major), lowrank r² (the r×r coordinates M in the step's basis).
 
 Shared closed forms: ``groups._cayley_coefficients`` and ``groups._dexp3_series`` are jitted as they stand;
 ``groups._rodrigues`` and ``groups._dexp3_coefficient`` branch on ``isinstance`` (numpy arrays or floats)
 and cannot be compiled: :func:`_rodrigues` and :func:`_dexp3_coefficient` below are their scalar branches.
+The so(4) closed forms of :mod:`liesuslov.groups.so4` are registered with ``numba.extending.register_jitable``
+in :mod:`.so4` and compiled as they stand (its docstring names the two scalar branches written there).
 
 Importing this module imports numba; ``import liesuslov`` does not import it.
 """

@@ -8,7 +8,7 @@ from numba import njit
 from ... import groups
 from .. import control
 
-KINDS = {None: 0, "so3": 1, "dense": 2, "lowrank": 3}
+KINDS = {None: 0, "so3": 1, "dense": 2, "lowrank": 3, "so4": 4}
 MODES = {"none": 0, "gamma": 1, "g": 2}
 CHARTS = {"exp": 0, "cayley": 1, None: 0}
 #: Fedorov–Kozlov models from this n on run the low-rank kind (below, dense m×m work is as cheap).

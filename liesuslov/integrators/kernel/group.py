@@ -1,10 +1,12 @@
 """The model (the probed polynomial field) and the group part by kind (so3 rotation vectors, dense matrices,
-the low-rank Fedorov–Kozlov basis): Omega, dphi⁻¹, the action on Gamma, the update of g, the state error."""
+the low-rank Fedorov–Kozlov basis, so4 pairs (p, q) in :mod:`.so4`): Omega, dphi⁻¹, the action on Gamma, the
+update of g, the state error."""
 
 from __future__ import annotations
 
 import math
 
+from . import so4 as _so4
 from .common import _jit
 from .maps import _dexp3_coefficient, _mat_act, _mat_dinv, _mat_phi, _mm, _so3_coef
 
@@ -33,11 +35,22 @@ def _field(x, Gam, has_gamma, fidx, fval, z, out):
 
 
 # ====================================================================================== the group part by kind
-# kind 1 so3 (3 numbers), 2 dense (m*m), 3 lowrank (r*r in the basis Q); see the module docstring.
+# kind 1 so3 (3 numbers), 2 dense (m*m), 3 lowrank (r*r in the basis Q), 4 so4 (6 numbers (p, q): the functions
+# of :mod:`.so4`, which have the signatures of the operations below); see the package docstring.
+_so4_omega = _jit(_so4._so4_omega)
+_so4_sq = _jit(_so4._so4_sq)
+_so4_dinv = _jit(_so4._so4_dinv)
+_so4_act = _jit(_so4._so4_act)
+_so4_update = _jit(_so4._so4_update)
+_so4_state = _jit(_so4._so4_state)
+
+
 @_jit
 def _omega_alg(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
     """out = Omega(x) in the kind's layout. Low-rank: adds column ``nc`` to the basis Q (Gram–Schmidt,
     twice) and returns the number of columns; the other kinds return nc unchanged."""
+    if kind == 4:
+        return _so4_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out)
     if kind == 3:
         n = Q.shape[0]
         r = Q.shape[1]
@@ -127,6 +140,8 @@ def _scratch(Wf, vbf, n):
 @_jit
 def _alg_sq(kind, Th):
     """|Theta|_F^2 / 2 (the squared rotation angle on so(3)): the chart-domain test of exp."""
+    if kind == 4:
+        return _so4_sq(kind, Th)
     acc = 0.0
     for i in range(Th.shape[0]):
         acc += Th[i] * Th[i]
@@ -136,6 +151,9 @@ def _alg_sq(kind, Th):
 @_jit
 def _alg_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
     """out = h dphi^{-1}_{-Th}(Om) in the kind's layout."""
+    if kind == 4:
+        _so4_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs)
+        return
     if kind == 1:
         t0, t1, t2_ = Th[0], Th[1], Th[2]
         a0, a1, a2 = Om[0], Om[1], Om[2]
@@ -176,6 +194,9 @@ def _alg_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
 @_jit
 def _alg_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
     """out = phi(sign Th) v for a vector v (n,)."""
+    if kind == 4:
+        _so4_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs)
+        return
     if kind == 1:
         w0, w1, w2 = Th[0], Th[1], Th[2]
         c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
@@ -217,6 +238,9 @@ def _alg_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ
     """The group part moved by Th: ``g phi(Th)`` (mode g, G flat m*m) or ``phi(-Th) Gamma`` (mode gamma)."""
     if mode == 1:
         _alg_act(kind, chart, skew, Th, -1.0, G, out, Wf, vbf, Q, nc, r, bufs)
+        return
+    if kind == 4:
+        _so4_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2)
         return
     if kind == 1:  # g R with R = c I + a hat(w) + b w w^T, by scalars (no reshape, no scratch)
         w0, w1, w2 = Th[0], Th[1], Th[2]
@@ -280,6 +304,9 @@ def _g_low_rank(Gm, Q, F, ra, PQ, PQ2, Om, add_g):
 def _alg_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
     """The chart increment Ea carried to the state: ``g1 E`` (mode g, m*m entries) or ``E Gamma1`` (mode
     gamma, n entries) — the error estimate of the group part, and (with Ea = Omega) its velocity."""
+    if kind == 4:
+        _so4_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2)
+        return
     if kind == 1:
         e0, e1, e2 = Ea[0], Ea[1], Ea[2]
         if mode == 1:

@@ -28,8 +28,9 @@ from .loop import _solve_batch, _solve_one
 def kind_for(model, mode: str, chart: str | None) -> str | None:
     """The group representation the kernel uses for ``model`` in ``mode`` (None for mode "none").
 
-    "so3" on so(3); "lowrank" for Fedorov–Kozlov models with n >= :data:`LOWRANK_MIN_N`; "dense" otherwise
-    (so(n), and general matrix algebras such as se(2), se(3)). so(4) runs as "dense".
+    "so3" on so(3); "so4" on so(4) (the pair (p, q) of so(3) ⊕ so(3), closed forms: :mod:`.so4`); "lowrank"
+    for Fedorov–Kozlov models with n >= :data:`LOWRANK_MIN_N`; "dense" otherwise (so(n), and general matrix
+    algebras such as se(2), se(3)).
     """
     if mode == "none":
         return None
@@ -37,6 +38,8 @@ def kind_for(model, mode: str, chart: str | None) -> str | None:
     n = getattr(model, "n", None)
     if name == "so(3)":
         return "so3"
+    if name == "so(4)":
+        return "so4"
     if name.startswith("so(") and getattr(model, "fedorov_kozlov", False) and n is not None and n >= LOWRANK_MIN_N:
         return "lowrank"
     return "dense"
@@ -55,16 +58,14 @@ def _prepare(problem: Problem):
         raise NotCompilable("an event is a user callable (not a LinearEvent): events are located on numpy")
     mode = problem.mode
     kind = problem.kind if mode != "none" else None
-    if kind == "so4":
-        kind = "dense"
     if kind not in KINDS:
         raise NotCompilable(f"the compiled kernel knows the kinds {sorted(k for k in KINDS if k)}, got {kind!r}")
     if mode != "none" and problem.chart not in ("exp", "cayley"):
         raise NotCompilable(f"the compiled kernel knows the charts exp and cayley, got {problem.chart!r}")
-    if kind in ("so3", "lowrank") and not problem.skew:
+    if kind in ("so3", "so4", "lowrank") and not problem.skew:
         raise NotCompilable(f"the {kind!r} kind needs so(n)")
-    if kind == "so3" and problem.m != 3:
-        raise NotCompilable(f"the 'so3' kind needs 3×3 matrices, got m = {problem.m}")
+    if kind in ("so3", "so4") and problem.m != int(kind[2]):
+        raise NotCompilable(f"the {kind!r} kind needs {kind[2]}×{kind[2]} matrices, got m = {problem.m}")
     cplan = compile_plan(problem.model, mode, problem.chart, skew=problem.skew, omega=kind != "lowrank")
     if kind == "lowrank":
         _check_fedorov_kozlov(problem.model)
@@ -92,7 +93,7 @@ def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool):
     k, m, q = int(problem.k), int(problem.m), int(problem.q)
     S, s = plan.S, plan.s
     r = S + 1 if kind == "lowrank" else 0
-    a = {None: 0, "so3": 3, "dense": m * m, "lowrank": r * r}[kind]
+    a = {None: 0, "so3": 3, "so4": 6, "dense": m * m, "lowrank": r * r}[kind]
     terms = groups.bernoulli_coefficients(groups.dexpinv_terms(plan.order))[1:]
     bern = np.array(terms, dtype=float).reshape(-1, 2)
     E = 0 if problem.event_coef is None else int(problem.event_coef.shape[1])
