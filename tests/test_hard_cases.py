@@ -706,7 +706,10 @@ def test_velocity_scale_invariance(scale, method, chart):
         assert np.abs(big.omega / scale - one.omega).max() < 1e-12 * wmax
         assert np.abs(big.g - one.g).max() < 1e-12
         return
-    assert abs(big.stats["steps"] - one.stats["steps"]) <= 10 + one.stats["steps"] // 10
+    # not step for step: the scaled atol also applies to the entries of g, which do not scale, so the entries
+    # near zero are measured more strictly at s < 1 (45 steps against 35 on the dense kind, 51 on the so4
+    # kind, whose rounding of those entries differs); the accuracy below is the property
+    assert abs(big.stats["steps"] - one.stats["steps"]) <= 10 + one.stats["steps"] // 2
     ref = ls.integrate(system, Omega0, (0.0, T), reconstruct=True, method="rkmk853", rtol=1e-13, atol=1e-15,
                        t_eval=ts)
     err_one = max(np.abs(one.omega - ref.omega).max() / wmax, np.abs(one.g - ref.g).max())

@@ -462,3 +462,17 @@ def test_general_matrix_algebra_se3(chart):
         assert np.all(res.status == 0)
         assert_same_run(res, numpy_solve(p))
         assert np.all(res.G[:, :, 12:15] == 0.0) and np.all(res.G[:, :, 15] == 1.0)  # the last row stays (0, 1)
+
+
+def test_warm_compiles_every_kind_and_rejects_unknown_ones():
+    """Each kind's scene runs on the compiled kernel (its family's loop); a kind that does not exist is refused
+    before any process starts."""
+    from liesuslov.integrators.kernel import warm
+
+    for kind in warm.KIND_SCENES:
+        assert warm.run_kind(kind) == "numba", kind
+    with pytest.raises(ValueError, match="kinds"):
+        warm.compile_kinds(["so5"])
+    with pytest.raises(ValueError, match="kind"):
+        warm.run_kind("so5")
+    assert set(warm.compile_kinds(["so3"], processes=1)) == {"so3"}

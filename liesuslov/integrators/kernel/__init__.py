@@ -1,21 +1,28 @@
 """The whole solve compiled (numba), one trajectory at a time: :func:`solve` takes a :class:`~.problem.Problem`.
 
-Per trajectory, inside one jitted function (no Python per step, no allocation per step): the RKMK stages of
+Per trajectory, inside one compiled loop (no Python per step, no allocation per step): the RKMK stages of
 the method's :class:`~.plan.StagePlan`, the step-size controller and the error norm of :mod:`.control`
 (those very functions, compiled by numba), the continuous extension for ``t_eval`` and events, event
-location by a bracketing root finder (Illinois), re-projection, failures with their time and code. A batch
-runs in contiguous chunks on threads (the jitted loop releases the GIL; no parfor, so one function to
-compile); a trajectory's numbers do not depend on its batch mates or the chunking (no reduction across
-trajectories, the same code path for B = 1 and B > 1).
+location by a bracketing root finder (Illinois), re-projection, failures with their time and code; the loop
+(:func:`.loop._solve_one`) calls one function per job — stages, the step's end and error, the first step,
+event location, output, re-projection. A batch runs in contiguous chunks on threads (the loop releases the
+GIL; no parfor); a trajectory's numbers do not depend on its batch mates or the chunking (no reduction
+across trajectories, the same code path for B = 1 and B > 1).
 
-Cost (measured on the 2-core machine under load, 2026-11-24): the first compiled call on an empty cache
-compiles one specialisation (~66 s CPU under load; the one int64 and one float64 parameter array carry
-every scene, so no other scene compiles again); later processes load it from the cache (< 1 s). RKMK4 with
-reconstruction, h = 0.005: so(3) ~1.4 µs per step (~5x a plain loop hard-coded for that method: the
-kernel's loops run over run-time sizes — k, stages, layouts — that the plain loop has as constants), a
-batch of 10^4 ~0.7 µs per trajectory-step on both cores; so(4) ~1.4 µs per step (so4 kind, the
-Klebsh–Tisserand scene of the benchmark; the dense kind ~4.3 µs, the plain loop ~0.3 µs); Fedorov–Kozlov
-SO(256) (low-rank kind) ~0.55 ms per step.
+Specialisations: one loop per *family* of kinds (:data:`~.common.FAMILIES`), the family a numba literal —
+the closed forms (so3, so4, and no group part) and the matrix algorithms (dense, lowrank) — so a scene
+compiles only its family's group code; the kind inside a family, the chart, the mode and every size are
+run-time values (one int64 and one float64 parameter array carry the scene), so no other scene compiles
+again. :mod:`.warm` compiles both families in parallel processes (``python -m
+liesuslov.integrators.kernel.warm``; the test session does it first).
+
+Cost (2-core machine shared with other work, 2026-11-24): the first compiled call on an empty cache
+compiles its family: ~30–40 s for the closed forms, ~60–90 s for the matrix family (one loop for every
+kind was ~65 s); later processes load it from the cache (~1 s). RKMK4 with reconstruction, h = 0.005,
+best of 20 runs (thread CPU time): so(3) ~0.8 µs per step (~6x a plain loop hard-coded for that method:
+the kernel's loops run over run-time sizes — k, stages, layouts — that the plain loop has as constants);
+so(4) ~1.4 µs per step (so4 kind, the Klebsh–Tisserand scene of the benchmark; the dense kind ~4.3 µs,
+the plain loop ~0.3 µs); Fedorov–Kozlov SO(256) (low-rank kind) ~0.55 ms per step.
 
 What is compiled
 ----------------

@@ -9,6 +9,9 @@ from ... import groups
 from .. import control
 
 KINDS = {None: 0, "so3": 1, "dense": 2, "lowrank": 3, "so4": 4}
+#: The family each kind compiles in (one loop per family, the kind a run-time value within it): 1 the closed
+#: forms (so3, so4, and no group part), 2 the matrix algorithms (dense, lowrank).
+FAMILIES = {0: 1, 1: 1, 4: 1, 2: 2, 3: 2}
 MODES = {"none": 0, "gamma": 1, "g": 2}
 CHARTS = {"exp": 0, "cayley": 1, None: 0}
 #: Fedorov–Kozlov models from this n on run the low-rank kind (below, dense m×m work is as cheap).
@@ -17,27 +20,24 @@ LOWRANK_MIN_N = 8
 EVENT_CAP = 16
 
 
+#: Options of every compiled function of the kernel (the kind implementations of :mod:`.group` too).
+_JIT_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
 def _jit(fn):
-    if njit is None:
-        return fn
-    return njit(cache=True, nogil=True, error_model="numpy")(fn)
+    """``fn`` compiled with :data:`_JIT_OPTIONS`; also the scalar formulas of :mod:`control` and
+    :mod:`liesuslov.groups`, compiled as they stand."""
+    return njit(**_JIT_OPTIONS)(fn)
 
 
-def _share(fn):
-    """A scalar formula of :mod:`control` or :mod:`liesuslov.groups`, compiled as it stands."""
-    if njit is None:
-        return fn
-    return njit(cache=True, nogil=True, error_model="numpy")(fn)
-
-
-_scale = _share(control.scale)
-_combine = _share(control.combine)
-_accept_factor = _share(control.accept_factor)
-_reject_factor = _share(control.reject_factor)
-_initial_step = _share(control.initial_step)
-_probe_step = _share(control.probe_step)
-_cayley_coefficients = _share(groups._cayley_coefficients)
-_dexp3_series = _share(groups._dexp3_series)
+_scale = _jit(control.scale)
+_combine = _jit(control.combine)
+_accept_factor = _jit(control.accept_factor)
+_reject_factor = _jit(control.reject_factor)
+_initial_step = _jit(control.initial_step)
+_probe_step = _jit(control.probe_step)
+_cayley_coefficients = _jit(groups._cayley_coefficients)
+_dexp3_series = _jit(groups._dexp3_series)
 
 
 # Layout of the packed integer parameters

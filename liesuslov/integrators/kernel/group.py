@@ -1,14 +1,26 @@
 """The model (the probed polynomial field) and the group part by kind (so3 rotation vectors, dense matrices,
 the low-rank Fedorov–Kozlov basis, so4 pairs (p, q) in :mod:`.so4`): Omega, dphi⁻¹, the action on Gamma, the
-update of g, the state error."""
+update of g, the state error.
+
+Each operation of the group part (``_omega_alg``, ``_alg_sq``, ``_alg_dinv``, ``_alg_act``, ``_alg_update``,
+``_alg_state``) is a stub that only compiled code calls, with the kind's code as its first argument, a
+numba literal (the loop is compiled once per kind: :func:`.loop._solve_one` takes ``kind`` as a literal).
+:func:`_by_kind` registers, for each stub, the implementation of each kind (plain functions with the stub's
+signature, compiled when a loop of that kind is): a kind's loop therefore compiles its own group code
+only — the so(3) loop none of the matrix algorithms. Adding a kind is one implementation per operation and
+one entry in each table at the end of this module.
+"""
 
 from __future__ import annotations
 
 import math
 
-from . import so4 as _so4
-from .common import _jit
+from numba import types
+from numba.extending import overload
+
+from .common import _JIT_OPTIONS, _jit
 from .maps import _dexp3_coefficient, _mat_act, _mat_dinv, _mat_phi, _mm, _so3_coef
+from .so4 import _so4_act, _so4_dinv, _so4_omega, _so4_sq, _so4_state, _so4_update
 
 
 # ====================================================================================== the model
@@ -34,72 +46,61 @@ def _field(x, Gam, has_gamma, fidx, fval, z, out):
         out[fidx[t, 0]] += v
 
 
-# ====================================================================================== the group part by kind
-# kind 1 so3 (3 numbers), 2 dense (m*m), 3 lowrank (r*r in the basis Q), 4 so4 (6 numbers (p, q): the functions
-# of :mod:`.so4`, which have the signatures of the operations below); see the package docstring.
-_so4_omega = _jit(_so4._so4_omega)
-_so4_sq = _jit(_so4._so4_sq)
-_so4_dinv = _jit(_so4._so4_dinv)
-_so4_act = _jit(_so4._so4_act)
-_so4_update = _jit(_so4._so4_update)
-_so4_state = _jit(_so4._so4_state)
+# ====================================================================================== the stubs
+# Layouts of an algebra element: so3 3 numbers (X21, X02, X10), dense m*m (row major), lowrank r*r (the
+# coordinates in the step's basis Q), so4 6 numbers (p, q); see the package docstring.
+def _omega_alg(family, kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
+    """out = Omega(x) in the kind's layout; returns the number of basis columns (low rank: adds column
+    ``nc`` to Q, Gram–Schmidt twice; the other kinds return nc unchanged)."""
 
 
+def _alg_sq(family, kind, Th):
+    """|Theta|_F^2 / 2 (the squared rotation angle on so(3)): the chart-domain test of exp."""
+
+
+def _alg_dinv(family, kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+    """out = h dphi^{-1}_{-Th}(Om) in the kind's layout."""
+
+
+def _alg_act(family, kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
+    """out = phi(sign Th) v for a vector v (n,)."""
+
+
+def _alg_update(family, kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+    """The group part moved by Th: ``g phi(Th)`` (mode g, G flat m*m) or ``phi(-Th) Gamma`` (mode gamma)."""
+
+
+def _alg_state(family, kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+    """The chart increment Ea carried to the state: ``g1 E`` (mode g, m*m entries) or ``E Gamma1`` (mode
+    gamma, n entries) — the error estimate of the group part, and (with Ea = Omega) its velocity."""
+
+
+def _by_family(first_kind: int, first, other):
+    """Compiled calls ``stub(family, kind, ...)`` with a literal family run ``first`` when ``kind ==
+    first_kind`` and ``other`` otherwise (a run-time branch between the family's two kinds)."""
+
+    def impl(family, kind, *args):
+        if kind == first_kind:
+            return first(kind, *args)
+        return other(kind, *args)
+
+    return impl
+
+
+def _by_kind(stub, table: dict) -> None:
+    """Register ``stub``'s implementations: ``table[family] = (first_kind, first, other)``."""
+
+    @overload(stub, prefer_literal=True, strict=False, jit_options=_JIT_OPTIONS)
+    def _typer(family, kind, *args):
+        if isinstance(family, types.IntegerLiteral) and family.literal_value in table:
+            return _by_family(*table[family.literal_value])
+        return None
+
+
+# ====================================================================================== Omega(x)
 @_jit
-def _omega_alg(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
-    """out = Omega(x) in the kind's layout. Low-rank: adds column ``nc`` to the basis Q (Gram–Schmidt,
-    twice) and returns the number of columns; the other kinds return nc unchanged."""
-    if kind == 4:
-        return _so4_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out)
-    if kind == 3:
-        n = Q.shape[0]
-        r = Q.shape[1]
-        u_n = n - 1
-        for i in range(r):
-            cvec[i] = 0.0
-        w = Om[0]  # scratch row (n,)
-        if nc == 1:
-            acc = 0.0
-            for p in range(u_n):
-                w[p] = x[p]
-                acc += x[p] * x[p]
-            rho1 = math.sqrt(acc)
-        else:
-            for i in range(1, nc):
-                acc = 0.0
-                for p in range(u_n):
-                    acc += Q[p, i] * x[p]
-                cvec[i] = acc
-            acc = 0.0
-            for p in range(u_n):
-                v = x[p]
-                for i in range(1, nc):
-                    v -= Q[p, i] * cvec[i]
-                w[p] = v
-                acc += v * v
-            rho1 = math.sqrt(acc)
-            for i in range(1, nc):  # second pass
-                acc = 0.0
-                for p in range(u_n):
-                    acc += Q[p, i] * w[p]
-                cvec[i] += acc
-                for p in range(u_n):
-                    w[p] -= Q[p, i] * acc
-        acc = 0.0
-        for p in range(u_n):
-            acc += w[p] * w[p]
-        rho = math.sqrt(acc)
-        if rho > 0.5 * rho1:
-            cvec[nc] = rho
-            for p in range(u_n):
-                Q[p, nc] = w[p] / rho
-        for i in range(r * r):
-            out[i] = 0.0
-        for i in range(r):
-            out[i * r] = cvec[i]
-            out[i] = -cvec[i]
-        out[0] = 0.0
-        return nc + 1
+def _omega_matrix(skew, x, widx, wval, Om):
+    """Om = Omega(x) as an (m, m) matrix from the probed linear map."""
     n = Om.shape[0]
     for i in range(n):
         for j in range(n):
@@ -110,17 +111,94 @@ def _omega_alg(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
         for i in range(n):
             for j in range(i + 1, n):
                 Om[j, i] = -Om[i, j]
-    if kind == 1:
-        out[0] = Om[2, 1]
-        out[1] = Om[0, 2]
-        out[2] = Om[1, 0]
-    else:
-        for i in range(n):
-            for j in range(n):
-                out[i * n + j] = Om[i, j]
+
+
+@_jit
+def _so3_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
+    _omega_matrix(skew, x, widx, wval, Om)
+    out[0] = Om[2, 1]
+    out[1] = Om[0, 2]
+    out[2] = Om[1, 0]
     return nc
 
 
+@_jit
+def _dense_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
+    _omega_matrix(skew, x, widx, wval, Om)
+    n = Om.shape[0]
+    for i in range(n):
+        for j in range(n):
+            out[i * n + j] = Om[i, j]
+    return nc
+
+
+@_jit
+def _lowrank_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
+    n = Q.shape[0]
+    r = Q.shape[1]
+    u_n = n - 1
+    for i in range(r):
+        cvec[i] = 0.0
+    w = Om[0]  # scratch row (n,)
+    if nc == 1:
+        acc = 0.0
+        for p in range(u_n):
+            w[p] = x[p]
+            acc += x[p] * x[p]
+        rho1 = math.sqrt(acc)
+    else:
+        for i in range(1, nc):
+            acc = 0.0
+            for p in range(u_n):
+                acc += Q[p, i] * x[p]
+            cvec[i] = acc
+        acc = 0.0
+        for p in range(u_n):
+            v = x[p]
+            for i in range(1, nc):
+                v -= Q[p, i] * cvec[i]
+            w[p] = v
+            acc += v * v
+        rho1 = math.sqrt(acc)
+        for i in range(1, nc):  # second pass
+            acc = 0.0
+            for p in range(u_n):
+                acc += Q[p, i] * w[p]
+            cvec[i] += acc
+            for p in range(u_n):
+                w[p] -= Q[p, i] * acc
+    acc = 0.0
+    for p in range(u_n):
+        acc += w[p] * w[p]
+    rho = math.sqrt(acc)
+    if rho > 0.5 * rho1:
+        cvec[nc] = rho
+        for p in range(u_n):
+            Q[p, nc] = w[p] / rho
+    for i in range(r * r):
+        out[i] = 0.0
+    for i in range(r):
+        out[i * r] = cvec[i]
+        out[i] = -cvec[i]
+    out[0] = 0.0
+    return nc + 1
+
+
+# ====================================================================================== |Theta|^2 / 2
+@_jit
+def _so3_sq(kind, Th):
+    return Th[0] * Th[0] + Th[1] * Th[1] + Th[2] * Th[2]
+
+
+@_jit
+def _matrix_sq(kind, Th):
+    acc = 0.0
+    for i in range(Th.shape[0]):
+        acc += Th[i] * Th[i]
+    return 0.5 * acc
+
+
+# ====================================================================================== helpers of the matrix kinds
 @_jit
 def _block(Th, r, ra, buf):
     """The leading ra×ra block of the r×r matrix stored flat in Th, as a contiguous (ra, ra) matrix."""
@@ -135,143 +213,6 @@ def _block(Th, r, ra, buf):
 def _scratch(Wf, vbf, n):
     """W (12, n, n) and vb (n, 1): C-contiguous views of the flat scratch, sized for n×n matrices."""
     return Wf[:12 * n * n].reshape((12, n, n)), vbf[:n].reshape((n, 1))
-
-
-@_jit
-def _alg_sq(kind, Th):
-    """|Theta|_F^2 / 2 (the squared rotation angle on so(3)): the chart-domain test of exp."""
-    if kind == 4:
-        return _so4_sq(kind, Th)
-    acc = 0.0
-    for i in range(Th.shape[0]):
-        acc += Th[i] * Th[i]
-    return acc if kind == 1 else 0.5 * acc
-
-
-@_jit
-def _alg_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
-    """out = h dphi^{-1}_{-Th}(Om) in the kind's layout."""
-    if kind == 4:
-        _so4_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs)
-        return
-    if kind == 1:
-        t0, t1, t2_ = Th[0], Th[1], Th[2]
-        a0, a1, a2 = Om[0], Om[1], Om[2]
-        tt = t0 * t0 + t1 * t1 + t2_ * t2_
-        if chart == 0:  # exact: (1 - c θ²) a + ½ θ × a + c (θ·a) θ
-            c = _dexp3_coefficient(tt)
-            cc, aa, bb = 1.0 - c * tt, 0.5, c
-        else:  # exact: a + ½ θ × a + ¼ (θ·a) θ
-            cc, aa, bb = 1.0, 0.5, 0.25
-        d = bb * (t0 * a0 + t1 * a1 + t2_ * a2)
-        out[0] = h * (cc * a0 + aa * (t1 * a2 - t2_ * a1) + d * t0)
-        out[1] = h * (cc * a1 + aa * (t2_ * a0 - t0 * a2) + d * t1)
-        out[2] = h * (cc * a2 + aa * (t0 * a1 - t1 * a0) + d * t2_)
-        return
-    if kind == 2:
-        n = int(math.sqrt(Th.shape[0]) + 0.5)
-        W, _ = _scratch(Wf, bufs[1], n)
-        Tm = Th.reshape((n, n))
-        Am = Om.reshape((n, n))
-        Rm = bufs[2][:n * n].reshape((n, n))
-        _mat_dinv(chart, skew, Tm, Am, Rm, W, bern)
-        for i in range(n * n):
-            out[i] = h * bufs[2][i]
-        return
-    ra = nc
-    W, _ = _scratch(Wf, bufs[2], ra)
-    Tm = _block(Th, r, ra, bufs[0])
-    Am = _block(Om, r, ra, bufs[1])
-    Rm = bufs[2][:ra * ra].reshape((ra, ra))
-    _mat_dinv(chart, skew, Tm, Am, Rm, W, bern)
-    for i in range(r * r):
-        out[i] = 0.0
-    for i in range(ra):
-        for j in range(ra):
-            out[i * r + j] = h * Rm[i, j]
-
-
-@_jit
-def _alg_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
-    """out = phi(sign Th) v for a vector v (n,)."""
-    if kind == 4:
-        _so4_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs)
-        return
-    if kind == 1:
-        w0, w1, w2 = Th[0], Th[1], Th[2]
-        c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
-        a = sign * a
-        v0, v1, v2 = v[0], v[1], v[2]
-        d = b * (w0 * v0 + w1 * v1 + w2 * v2)
-        out[0] = c * v0 + a * (w1 * v2 - w2 * v1) + d * w0
-        out[1] = c * v1 + a * (w2 * v0 - w0 * v2) + d * w1
-        out[2] = c * v2 + a * (w0 * v1 - w1 * v0) + d * w2
-        return
-    if kind == 2:
-        n = v.shape[0]
-        W, vb = _scratch(Wf, vbf, n)
-        _mat_act(chart, skew, Th.reshape((n, n)), sign, v, out, W, vb)
-        return
-    n = v.shape[0]
-    ra = nc
-    W, vb = _scratch(Wf, vbf, ra)
-    Mb = _block(Th, r, ra, bufs[0])
-    y = bufs[1][:ra]
-    z = bufs[2][:ra]
-    for i in range(ra):
-        acc = 0.0
-        for p in range(n):
-            acc += Q[p, i] * v[p]
-        y[i] = acc
-    _mat_act(chart, skew, Mb, sign, y, z, W, vb)
-    for i in range(ra):
-        z[i] -= y[i]
-    for p in range(n):
-        acc = v[p]
-        for i in range(ra):
-            acc += Q[p, i] * z[i]
-        out[p] = acc
-
-
-@_jit
-def _alg_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
-    """The group part moved by Th: ``g phi(Th)`` (mode g, G flat m*m) or ``phi(-Th) Gamma`` (mode gamma)."""
-    if mode == 1:
-        _alg_act(kind, chart, skew, Th, -1.0, G, out, Wf, vbf, Q, nc, r, bufs)
-        return
-    if kind == 4:
-        _so4_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2)
-        return
-    if kind == 1:  # g R with R = c I + a hat(w) + b w w^T, by scalars (no reshape, no scratch)
-        w0, w1, w2 = Th[0], Th[1], Th[2]
-        c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
-        bw0, bw1, bw2 = b * w0, b * w1, b * w2
-        r00, r01, r02 = c + bw0 * w0, bw0 * w1 - a * w2, bw0 * w2 + a * w1
-        r10, r11, r12 = bw0 * w1 + a * w2, c + bw1 * w1, bw1 * w2 - a * w0
-        r20, r21, r22 = bw0 * w2 - a * w1, bw1 * w2 + a * w0, c + bw2 * w2
-        for i in range(3):
-            g0, g1, g2 = G[3 * i], G[3 * i + 1], G[3 * i + 2]
-            out[3 * i] = g0 * r00 + g1 * r10 + g2 * r20
-            out[3 * i + 1] = g0 * r01 + g1 * r11 + g2 * r21
-            out[3 * i + 2] = g0 * r02 + g1 * r12 + g2 * r22
-        return
-    if kind == 2:
-        n = int(math.sqrt(G.shape[0]) + 0.5)
-        W, _ = _scratch(Wf, vbf, n)
-        R = W[10]
-        _mat_phi(chart, skew, Th.reshape((n, n)), R, W)
-        _mm(G.reshape((n, n)), R, out.reshape((n, n)))
-        return
-    # low rank: g + (g Q) (phi(M) - I) Q^T
-    n = Q.shape[0]
-    ra = nc
-    W, _ = _scratch(Wf, vbf, ra)
-    Mb = _block(Th, r, ra, bufs[0])
-    F = bufs[1][:ra * ra].reshape((ra, ra))
-    _mat_phi(chart, skew, Mb, F, W)
-    for i in range(ra):
-        F[i, i] -= 1.0
-    _g_low_rank(G.reshape((n, n)), Q, F, ra, PQ, PQ2, out.reshape((n, n)), True)
 
 
 @_jit
@@ -300,39 +241,181 @@ def _g_low_rank(Gm, Q, F, ra, PQ, PQ2, Om, add_g):
             Om[i, j] = acc
 
 
+# ====================================================================================== h dphi^{-1}
 @_jit
-def _alg_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
-    """The chart increment Ea carried to the state: ``g1 E`` (mode g, m*m entries) or ``E Gamma1`` (mode
-    gamma, n entries) — the error estimate of the group part, and (with Ea = Omega) its velocity."""
-    if kind == 4:
-        _so4_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2)
+def _so3_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+    t0, t1, t2_ = Th[0], Th[1], Th[2]
+    a0, a1, a2 = Om[0], Om[1], Om[2]
+    tt = t0 * t0 + t1 * t1 + t2_ * t2_
+    if chart == 0:  # exact: (1 - c θ²) a + ½ θ × a + c (θ·a) θ
+        c = _dexp3_coefficient(tt)
+        cc, aa, bb = 1.0 - c * tt, 0.5, c
+    else:  # exact: a + ½ θ × a + ¼ (θ·a) θ
+        cc, aa, bb = 1.0, 0.5, 0.25
+    d = bb * (t0 * a0 + t1 * a1 + t2_ * a2)
+    out[0] = h * (cc * a0 + aa * (t1 * a2 - t2_ * a1) + d * t0)
+    out[1] = h * (cc * a1 + aa * (t2_ * a0 - t0 * a2) + d * t1)
+    out[2] = h * (cc * a2 + aa * (t0 * a1 - t1 * a0) + d * t2_)
+
+
+@_jit
+def _dense_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+    n = int(math.sqrt(Th.shape[0]) + 0.5)
+    W, _ = _scratch(Wf, bufs[1], n)
+    Tm = Th.reshape((n, n))
+    Am = Om.reshape((n, n))
+    Rm = bufs[2][:n * n].reshape((n, n))
+    _mat_dinv(chart, skew, Tm, Am, Rm, W, bern)
+    for i in range(n * n):
+        out[i] = h * bufs[2][i]
+
+
+@_jit
+def _lowrank_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+    ra = nc
+    W, _ = _scratch(Wf, bufs[2], ra)
+    Tm = _block(Th, r, ra, bufs[0])
+    Am = _block(Om, r, ra, bufs[1])
+    Rm = bufs[2][:ra * ra].reshape((ra, ra))
+    _mat_dinv(chart, skew, Tm, Am, Rm, W, bern)
+    for i in range(r * r):
+        out[i] = 0.0
+    for i in range(ra):
+        for j in range(ra):
+            out[i * r + j] = h * Rm[i, j]
+
+
+# ====================================================================================== phi(sign Th) v
+@_jit
+def _so3_rotate(chart, Th, sign, v, out):
+    """out = phi(sign hat(Th)) v = c v + sign a Th × v + b (Th·v) Th."""
+    w0, w1, w2 = Th[0], Th[1], Th[2]
+    c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
+    a = sign * a
+    v0, v1, v2 = v[0], v[1], v[2]
+    d = b * (w0 * v0 + w1 * v1 + w2 * v2)
+    out[0] = c * v0 + a * (w1 * v2 - w2 * v1) + d * w0
+    out[1] = c * v1 + a * (w2 * v0 - w0 * v2) + d * w1
+    out[2] = c * v2 + a * (w0 * v1 - w1 * v0) + d * w2
+
+
+@_jit
+def _so3_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
+    _so3_rotate(chart, Th, sign, v, out)
+
+
+@_jit
+def _dense_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
+    n = v.shape[0]
+    W, vb = _scratch(Wf, vbf, n)
+    _mat_act(chart, skew, Th.reshape((n, n)), sign, v, out, W, vb)
+
+
+@_jit
+def _lowrank_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
+    n = v.shape[0]
+    ra = nc
+    W, vb = _scratch(Wf, vbf, ra)
+    Mb = _block(Th, r, ra, bufs[0])
+    y = bufs[1][:ra]
+    z = bufs[2][:ra]
+    for i in range(ra):
+        acc = 0.0
+        for p in range(n):
+            acc += Q[p, i] * v[p]
+        y[i] = acc
+    _mat_act(chart, skew, Mb, sign, y, z, W, vb)
+    for i in range(ra):
+        z[i] -= y[i]
+    for p in range(n):
+        acc = v[p]
+        for i in range(ra):
+            acc += Q[p, i] * z[i]
+        out[p] = acc
+
+
+# ====================================================================================== g phi(Th) or phi(-Th) Gamma
+@_jit
+def _so3_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+    if mode == 1:
+        _so3_rotate(chart, Th, -1.0, G, out)
         return
-    if kind == 1:
-        e0, e1, e2 = Ea[0], Ea[1], Ea[2]
-        if mode == 1:
-            v0, v1, v2 = G1[0], G1[1], G1[2]
-            out[0] = e1 * v2 - e2 * v1
-            out[1] = e2 * v0 - e0 * v2
-            out[2] = e0 * v1 - e1 * v0
-            return
-        for i in range(3):  # row i of g1 times hat(e)
-            g0, g1, g2 = G1[3 * i], G1[3 * i + 1], G1[3 * i + 2]
-            out[3 * i] = g1 * e2 - g2 * e1
-            out[3 * i + 1] = g2 * e0 - g0 * e2
-            out[3 * i + 2] = g0 * e1 - g1 * e0
+    # g R with R = c I + a hat(w) + b w w^T, by scalars (no reshape, no scratch)
+    w0, w1, w2 = Th[0], Th[1], Th[2]
+    c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
+    bw0, bw1, bw2 = b * w0, b * w1, b * w2
+    r00, r01, r02 = c + bw0 * w0, bw0 * w1 - a * w2, bw0 * w2 + a * w1
+    r10, r11, r12 = bw0 * w1 + a * w2, c + bw1 * w1, bw1 * w2 - a * w0
+    r20, r21, r22 = bw0 * w2 - a * w1, bw1 * w2 + a * w0, c + bw2 * w2
+    for i in range(3):
+        g0, g1, g2 = G[3 * i], G[3 * i + 1], G[3 * i + 2]
+        out[3 * i] = g0 * r00 + g1 * r10 + g2 * r20
+        out[3 * i + 1] = g0 * r01 + g1 * r11 + g2 * r21
+        out[3 * i + 2] = g0 * r02 + g1 * r12 + g2 * r22
+
+
+@_jit
+def _dense_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+    if mode == 1:
+        _dense_act(kind, chart, skew, Th, -1.0, G, out, Wf, vbf, Q, nc, r, bufs)
         return
-    if kind == 2:
-        if mode == 1:
-            n = G1.shape[0]
-            for i in range(n):
-                acc = 0.0
-                for j in range(n):
-                    acc += Ea[i * n + j] * G1[j]
-                out[i] = acc
-            return
-        n = int(math.sqrt(G1.shape[0]) + 0.5)
-        _mm(G1.reshape((n, n)), Ea.reshape((n, n)), out.reshape((n, n)))
+    n = int(math.sqrt(G.shape[0]) + 0.5)
+    W, _ = _scratch(Wf, vbf, n)
+    R = W[10]
+    _mat_phi(chart, skew, Th.reshape((n, n)), R, W)
+    _mm(G.reshape((n, n)), R, out.reshape((n, n)))
+
+
+@_jit
+def _lowrank_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+    if mode == 1:
+        _lowrank_act(kind, chart, skew, Th, -1.0, G, out, Wf, vbf, Q, nc, r, bufs)
         return
+    # g + (g Q) (phi(M) - I) Q^T
+    n = Q.shape[0]
+    ra = nc
+    W, _ = _scratch(Wf, vbf, ra)
+    Mb = _block(Th, r, ra, bufs[0])
+    F = bufs[1][:ra * ra].reshape((ra, ra))
+    _mat_phi(chart, skew, Mb, F, W)
+    for i in range(ra):
+        F[i, i] -= 1.0
+    _g_low_rank(G.reshape((n, n)), Q, F, ra, PQ, PQ2, out.reshape((n, n)), True)
+
+
+# ====================================================================================== the state's error
+@_jit
+def _so3_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+    e0, e1, e2 = Ea[0], Ea[1], Ea[2]
+    if mode == 1:
+        v0, v1, v2 = G1[0], G1[1], G1[2]
+        out[0] = e1 * v2 - e2 * v1
+        out[1] = e2 * v0 - e0 * v2
+        out[2] = e0 * v1 - e1 * v0
+        return
+    for i in range(3):  # row i of g1 times hat(e)
+        g0, g1, g2 = G1[3 * i], G1[3 * i + 1], G1[3 * i + 2]
+        out[3 * i] = g1 * e2 - g2 * e1
+        out[3 * i + 1] = g2 * e0 - g0 * e2
+        out[3 * i + 2] = g0 * e1 - g1 * e0
+
+
+@_jit
+def _dense_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+    if mode == 1:
+        n = G1.shape[0]
+        for i in range(n):
+            acc = 0.0
+            for j in range(n):
+                acc += Ea[i * n + j] * G1[j]
+            out[i] = acc
+        return
+    n = int(math.sqrt(G1.shape[0]) + 0.5)
+    _mm(G1.reshape((n, n)), Ea.reshape((n, n)), out.reshape((n, n)))
+
+
+@_jit
+def _lowrank_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
     n = Q.shape[0]
     ra = nc
     Eb = _block(Ea, r, ra, bufs[0])
@@ -356,3 +439,13 @@ def _alg_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
             out[p] = acc
         return
     _g_low_rank(G1.reshape((n, n)), Q, Eb, ra, PQ, PQ2, out.reshape((n, n)), False)
+
+
+# ============================================================================ the tables (codes: common.KINDS)
+# family 1 (closed forms): so3, so4 (and mode "none", which calls none of these); family 2 (matrices): dense, lowrank
+_by_kind(_omega_alg, {1: (1, _so3_omega, _so4_omega), 2: (2, _dense_omega, _lowrank_omega)})
+_by_kind(_alg_sq, {1: (1, _so3_sq, _so4_sq), 2: (2, _matrix_sq, _matrix_sq)})
+_by_kind(_alg_dinv, {1: (1, _so3_dinv, _so4_dinv), 2: (2, _dense_dinv, _lowrank_dinv)})
+_by_kind(_alg_act, {1: (1, _so3_act, _so4_act), 2: (2, _dense_act, _lowrank_act)})
+_by_kind(_alg_update, {1: (1, _so3_update, _so4_update), 2: (2, _dense_update, _lowrank_update)})
+_by_kind(_alg_state, {1: (1, _so3_state, _so4_state), 2: (2, _dense_state, _lowrank_state)})

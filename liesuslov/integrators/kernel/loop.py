@@ -32,7 +32,6 @@ from .common import (
     _I_NEV,
     _I_NEWIN,
     _I_NF,
-    _I_NT,
     _I_NW,
     _I_ORDER,
     _I_P,
@@ -110,16 +109,365 @@ def _body_vertical(mode, G, gam, out):
 
 
 @_jit
-def _solve_one(lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap, xi_out, G_out, status, t_stop,
+def _fresh_basis(Q):
+    """A new step's low-rank basis: column 0 stays e_n, the others are rebuilt stage by stage (Q has no rows
+    for the other kinds)."""
+    for p in range(Q.shape[0] - 1):
+        for j in range(1, Q.shape[1]):
+            Q[p, j] = 0.0
+
+
+@_jit
+def _event_values(bi, ev_coef, ev_off, xi, G, out):
+    """The linear event functions at the state (xi, G): ``coef . (xi, G) - offset``."""
+    k = xi.shape[0]
+    for e in range(out.shape[0]):
+        acc = -ev_off[bi, e]
+        for c in range(k):
+            acc += ev_coef[bi, e, c] * xi[c]
+        for c in range(G.shape[0]):
+            acc += ev_coef[bi, e, k + c] * G[c]
+        out[e] = acc
+
+
+@_jit
+def _crossings(gold, gnew, at_start, ev_dir, act_e):
+    """The events whose value changed sign over the step, in their direction (scipy's rule); their count."""
+    n_act = 0
+    for e in range(gold.shape[0]):
+        go = gold[e]
+        gn = gnew[e]
+        if go == 0.0 and at_start:  # starting on the surface is not a crossing
+            continue
+        up = go <= 0.0 and gn >= 0.0 and go != gn
+        down = go >= 0.0 and gn <= 0.0 and go != gn
+        d = ev_dir[e]
+        if (up and d >= 0) or (down and d <= 0):
+            act_e[n_act] = e
+            n_act += 1
+    return n_act
+
+
+@_jit
+def _dense_state(family, kind, chart, skew, mode, th, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb, Q, nc, r, bufs,
+                 PQ, PQ2):
+    """The state at theta of the step on the continuous extension: ``xit`` and ``Gt`` (g phi(Theta(theta))
+    or phi(-Theta(theta)) Gamma)."""
+    _dense_at(th, dense, wts, xi, hL, hK, xit, Tht)
+    if mode != 0:
+        _alg_update(family, kind, chart, skew, mode, G, Tht, Gt, W, vb, Q, nc, r, bufs, PQ, PQ2)
+
+
+@_jit
+def _stages(family, kind, chart, skew, mode, has_g, i, i_hi, i_domain, h, xi, A, F, hL, hK, Xi, Th, Gam0, Gam, z, fidx,
+            fval, widx, wval, Om, Q, nc, cvec, Oa, W, vb, bern, r, bufs):
+    """Stages ``i .. i_hi-1`` from the rows above them: ``F``, ``hL = h F`` and ``hK = h dphi^{-1}(Omega)``.
+
+    Returns ``(nc, ok)``: the low-rank basis size, and False when a stage below ``i_domain`` (those of the
+    trial step; not the extension's extra stages) has its chart argument outside the exponential's domain."""
+    k = xi.shape[0]
+    a = Th.shape[0]
+    ok = True
+    while i < i_hi:
+        for c in range(k):
+            acc = 0.0
+            for j in range(i):
+                acc += A[i, j] * hL[j, c]
+            Xi[c] = xi[c] + acc
+        if mode != 0:
+            for c in range(a):
+                acc = 0.0
+                for j in range(i):
+                    acc += A[i, j] * hK[j, c]
+                Th[c] = acc
+            if chart == 0 and skew and i < i_domain and _alg_sq(family, kind, Th) >= _PI2:
+                ok = False
+            if has_g:
+                _alg_act(family, kind, chart, skew, Th, -1.0, Gam0, Gam, W, vb, Q, nc, r, bufs)
+        _field(Xi, Gam, has_g, fidx, fval, z, F[i])
+        for c in range(k):
+            hL[i, c] = h * F[i, c]
+        if mode != 0:
+            nc = _omega_alg(family, kind, skew, Xi, widx, wval, Om, Q, nc, cvec, Oa)
+            _alg_dinv(family, kind, chart, skew, Th, Oa, h, hK[i], W, bern, nc, r, bufs)
+        i += 1
+    return nc, ok
+
+
+@_jit
+def _step_end(family, kind, chart, skew, mode, adaptive, s, s_eval, bw, err, rtol, atol, xi, G, hL, hK, xi1, Th1, G1,
+              Ea, Eg, W, vb, Q, nc, r, bufs, PQ, PQ2):
+    """The trial step's end ``xi1``, ``G1`` and its error norm (:mod:`.control`).
+
+    Returns ``(norm, in_domain, finite)``: the norm (0 for fixed steps, inf when not finite or out of the
+    chart's domain), whether the step's chart argument is in the exponential's domain, whether the new
+    state is finite."""
+    k = xi.shape[0]
+    q = G.shape[0]
+    a = Th1.shape[0]
+    for c in range(k):
+        acc = 0.0
+        for j in range(s):
+            acc += bw[j] * hL[j, c]
+        xi1[c] = xi[c] + acc
+    in_domain = True
+    if mode != 0:
+        for c in range(a):
+            acc = 0.0
+            for j in range(s):
+                acc += bw[j] * hK[j, c]
+            Th1[c] = acc
+        if chart == 0 and skew and _alg_sq(family, kind, Th1) >= _PI2:
+            in_domain = False
+        _alg_update(family, kind, chart, skew, mode, G, Th1, G1, W, vb, Q, nc, r, bufs, PQ, PQ2)
+    finite = _finite(xi1) and _finite(G1)
+    if not adaptive:
+        return 0.0, in_domain, finite
+    ne = err.shape[0]
+    s5 = 0.0
+    s3 = 0.0
+    for e in range(ne):
+        acc2 = 0.0
+        for c in range(k):
+            acc = 0.0
+            for j in range(s_eval):
+                acc += err[e, j] * hL[j, c]
+            v = acc / _scale(xi[c], xi1[c], rtol, atol)
+            acc2 += v * v
+        if mode != 0:
+            for c in range(a):
+                acc = 0.0
+                for j in range(s_eval):
+                    acc += err[e, j] * hK[j, c]
+                Ea[c] = acc
+            _alg_state(family, kind, mode, G1, Ea, Eg, Q, nc, r, bufs, PQ, PQ2)
+            for c in range(q):
+                v = Eg[c] / _scale(G[c], G1[c], rtol, atol)
+                acc2 += v * v
+        if e == 0:
+            s5 = acc2
+        else:
+            s3 = acc2
+    nrm = _combine(s5, s3, k + q, ne == 2)
+    if not (in_domain and finite):
+        nrm = np.inf
+    return nrm, in_domain, finite
+
+
+@_jit
+def _first_step(family, kind, skew, mode, has_g, order, direction, rtol, atol, xi, G, gam, F, xit, Gt, Gam, z, fidx,
+                fval, widx, wval, Om, Q, cvec, Oa, Eg, r, bufs, PQ, PQ2, sc_y, f_y):
+    """Hairer's starting step (as scipy's) on the embedded state y = (xi, G), f = (xi_dot, group velocity);
+    ``F[0]`` holds the field at the start, ``F[1]`` gets the probe's (one evaluation). NaN if it breaks down."""
+    k = xi.shape[0]
+    q = G.shape[0]
+    N = k + q
+    if mode != 0:
+        _fresh_basis(Q)
+        nc = _omega_alg(family, kind, skew, xi, widx, wval, Om, Q, np.int64(1), cvec, Oa)
+        _alg_state(family, kind, mode, G, Oa, Eg, Q, nc, r, bufs, PQ, PQ2)
+    for c in range(k):
+        sc_y[c] = _scale(xi[c], xi[c], rtol, atol)
+        f_y[c] = F[0, c]
+    for c in range(q):
+        sc_y[k + c] = _scale(G[c], G[c], rtol, atol)
+        f_y[k + c] = -Eg[c] if mode == 1 else Eg[c]
+    d0 = 0.0
+    d1 = 0.0
+    for c in range(k):
+        d0 += (xi[c] / sc_y[c]) ** 2
+    for c in range(q):
+        d0 += (G[c] / sc_y[k + c]) ** 2
+    for c in range(N):
+        d1 += (f_y[c] / sc_y[c]) ** 2
+    d0 = math.sqrt(d0 / N)
+    d1 = math.sqrt(d1 / N)
+    h0 = _probe_step(d0, d1)
+    hp = h0 * direction
+    for c in range(k):
+        xit[c] = xi[c] + hp * f_y[c]
+    for c in range(q):
+        Gt[c] = G[c] + hp * f_y[k + c]
+    if has_g:
+        _body_vertical(mode, Gt, gam, Gam)
+    _field(xit, Gam, has_g, fidx, fval, z, F[1])
+    if mode != 0:
+        _fresh_basis(Q)
+        nc = _omega_alg(family, kind, skew, xit, widx, wval, Om, Q, np.int64(1), cvec, Oa)
+        _alg_state(family, kind, mode, Gt, Oa, Eg, Q, nc, r, bufs, PQ, PQ2)
+    d2 = 0.0
+    for c in range(k):
+        d2 += ((F[1, c] - f_y[c]) / sc_y[c]) ** 2
+    for c in range(q):
+        v = -Eg[c] if mode == 1 else Eg[c]
+        d2 += ((v - f_y[k + c]) / sc_y[k + c]) ** 2
+    d2 = math.sqrt(d2 / N) / h0
+    return _initial_step(d0, d1, d2, h0, order) * direction
+
+
+@_jit
+def _locate(family, kind, chart, skew, mode, bi, n_act, act_e, act_th, gold, gnew, ev_needG, ev_coef, ev_off, ev_term,
+            cap, ev_count, ev_t, ev_xi, ev_G, t, h, t_new, direction, dense, wts, xi, G, xi1, G1, hL, hK, xit, Tht, Gt,
+            W, vb, Q, nc, r, bufs, PQ, PQ2):
+    """Locate the crossings of the step (Illinois on theta in [0, 1] on the continuous extension, to a few
+    ulps of t) and record them in time order, up to the first terminal one.
+
+    Returns ``(terminal, t_stop)``: whether a terminal event stopped the trajectory, and its time."""
+    k = xi.shape[0]
+    q = G.shape[0]
+    for ia in range(n_act):
+        e = act_e[ia]
+        lo = 0.0
+        hi = 1.0
+        flo = gold[e]
+        fhi = gnew[e]
+        tlo = flo
+        thi = fhi
+        side = 0
+        root = -1.0
+        if flo == 0.0:
+            root = 0.0
+        elif fhi == 0.0:
+            root = 1.0
+        for _it in range(300):
+            if root >= 0.0:
+                break
+            cth = (lo * fhi - hi * flo) / (fhi - flo)
+            if not (lo < cth < hi):
+                cth = 0.5 * (lo + hi)
+            if cth <= lo or cth >= hi:
+                break
+            # the value at cth, on the continuous extension (the group part only when the event reads it)
+            _dense_at(cth, dense, wts, xi, hL, hK, xit, Tht)
+            fc = -ev_off[bi, e]
+            for c in range(k):
+                fc += ev_coef[bi, e, c] * xit[c]
+            if ev_needG[e]:
+                _alg_update(family, kind, chart, skew, mode, G, Tht, Gt, W, vb, Q, nc, r, bufs, PQ, PQ2)
+                for c in range(q):
+                    fc += ev_coef[bi, e, k + c] * Gt[c]
+            if fc == 0.0:
+                root = cth
+                break
+            if (fc > 0.0) == (fhi > 0.0):
+                hi = cth
+                fhi = fc
+                thi = fc
+                if side == 1:
+                    flo *= 0.5
+                side = 1
+            else:
+                lo = cth
+                flo = fc
+                tlo = fc
+                if side == -1:
+                    fhi *= 0.5
+                side = -1
+            if abs(h) * (hi - lo) <= 4.0 * _ulp(t + cth * h, direction):
+                break
+        if root < 0.0:
+            root = lo if abs(tlo) < abs(thi) else hi
+        act_th[ia] = root
+    # insertion sort by theta (ties: event order)
+    for ia in range(1, n_act):
+        j = ia
+        while j > 0 and act_th[j - 1] > act_th[j]:
+            tmp = act_th[j - 1]
+            act_th[j - 1] = act_th[j]
+            act_th[j] = tmp
+            tmpe = act_e[j - 1]
+            act_e[j - 1] = act_e[j]
+            act_e[j] = tmpe
+            j -= 1
+    terminal = False
+    t_stop = t_new
+    stop_th = 2.0
+    for ia in range(n_act):
+        e = act_e[ia]
+        th_ = act_th[ia]
+        if terminal and th_ > stop_th:
+            break
+        te = t_new if th_ == 1.0 else t + th_ * h
+        if th_ == 1.0:
+            for c in range(k):
+                xit[c] = xi1[c]
+            for c in range(q):
+                Gt[c] = G1[c]
+        else:
+            _dense_state(family, kind, chart, skew, mode, th_, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb, Q, nc, r,
+                         bufs, PQ, PQ2)
+        cnt = ev_count[bi, e]
+        if cnt < cap:
+            ev_t[bi, e, cnt] = te
+            for c in range(k):
+                ev_xi[bi, e, cnt, c] = xit[c]
+            for c in range(q):
+                ev_G[bi, e, cnt, c] = Gt[c]
+        ev_count[bi, e] = cnt + 1
+        if ev_term[e] != 0 and not terminal:
+            terminal = True
+            t_stop = te
+            stop_th = th_
+    return terminal, t_stop
+
+
+@_jit
+def _outputs(family, kind, chart, skew, mode, bi, ie, t_eval, t_lim, t, h, t_new, direction, dense, wts, xi, G, xi1, G1,
+             hL, hK, xit, Tht, Gt, W, vb, Q, nc, r, bufs, PQ, PQ2, xi_out, G_out):
+    """Write the output times up to ``t_lim`` inside the accepted step (the continuous extension; the step's
+    end exactly); returns the next output index."""
+    k = xi.shape[0]
+    q = G.shape[0]
+    NT = t_eval.shape[0]
+    while ie < NT and direction * (t_eval[ie] - t_lim) <= 0.0:
+        te = t_eval[ie]
+        if te == t_new:
+            for c in range(k):
+                xi_out[ie, bi, c] = xi1[c]
+            for c in range(q):
+                G_out[ie, bi, c] = G1[c]
+        else:
+            _dense_state(family, kind, chart, skew, mode, (te - t) / h, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb,
+                         Q, nc, r, bufs, PQ, PQ2)
+            for c in range(k):
+                xi_out[ie, bi, c] = xit[c]
+            if mode != 0:
+                for c in range(q):
+                    G_out[ie, bi, c] = Gt[c]
+        ie += 1
+    return ie
+
+
+@_jit
+def _reproject(mode, G, Wg):
+    """Back onto the group: one Newton–Schulz step for g (mode g), |Gamma| = 1 (mode gamma)."""
+    if mode == 2:
+        m = Wg.shape[1]
+        _polar_step(G.reshape((m, m)), Wg[0], Wg[1])
+    elif mode == 1:
+        acc = 0.0
+        for c in range(G.shape[0]):
+            acc += G[c] * G[c]
+        nr = math.sqrt(acc)
+        for c in range(G.shape[0]):
+            G[c] = G[c] / nr
+
+
+@_jit
+def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap, xi_out, G_out, status, t_stop,
                failure, nfev_o, steps_o, rejected_o, ev_count, ev_t, ev_xi, ev_G):
     """Integrate trajectories ``lo .. hi-1`` one after the other (see the module docstring); returns the
-    recorded steps of the last one (record mode, a single trajectory)."""
+    recorded steps of the last one (record mode, a single trajectory).
+
+    ``family`` (:data:`~.common.FAMILIES`) is a compile-time literal: each family of kinds compiles its own
+    loop, with only its own group code (:mod:`.group`); the kind within it is a run-time value."""
+    numba.literally(family)
+    kind = iprm[_I_KIND]
     k = iprm[_I_K]
     m = iprm[_I_M]
     q = iprm[_I_Q]
     mode = iprm[_I_MODE]
     chart = iprm[_I_CHART]
-    kind = iprm[_I_KIND]
     skew = iprm[_I_SKEW] != 0
     has_g = iprm[_I_HASG] != 0
     s = iprm[_I_S]
@@ -140,7 +488,6 @@ def _solve_one(lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap,
     record = iprm[_I_RECORD] != 0
     r = iprm[_I_R]
     a = iprm[_I_A]
-    NT = iprm[_I_NT]
     o = _NHEAD
     fidx = iprm[o:o + 3 * nf].reshape((nf, 3))
     o += 3 * nf
@@ -169,63 +516,70 @@ def _solve_one(lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap,
     o += nf
     wval = fprm[o:o + nw]
     direction = 1.0 if t1 > t0 else -1.0
-    group = mode != 0
-    N = k + q
     s_eval = s + (1 if new_in else 0)
-
+    # np.int64(1), not 1: numba compiles a separate specialisation for a literal argument
+    i1 = np.int64(1)
+    # scratch (once per call; each trajectory overwrites what it reads)
+    n = m if has_g else 0
+    mm = 3 if kind == 1 else (m if kind == 2 else r)
+    F = np.zeros((S, k))
+    hL = np.zeros((S, k))
+    hK = np.zeros((S, a))
+    xi = np.zeros(k)
+    G = np.zeros(q)
+    xi1 = np.zeros(k)
+    G1 = np.zeros(q)
+    Th = np.zeros(a)
+    Th1 = np.zeros(a)
+    Oa = np.zeros(a)
+    Ea = np.zeros(a)
+    Eg = np.zeros(q)
+    Xi = np.zeros(k)
+    Gam0 = np.zeros(n)
+    Gam = np.zeros(n)
+    z = np.zeros(k + n)
+    Om = np.zeros((m if kind != 3 else 1, m))
+    W = np.zeros(12 * mm * mm)  # flat: viewed as (12, n, n) for the size at hand (group._scratch)
+    vb = np.zeros(mm)
+    bufs = np.zeros((3, max(mm * mm, 1)))
+    Q = np.zeros((m if kind == 3 else 0, r))
+    cvec = np.zeros(r)
+    PQ = np.zeros((m if kind == 3 else 0, r))
+    PQ2 = np.zeros((m if kind == 3 else 0, r))
+    Wg = np.zeros((2, m if (mode == 2 and reproj) else 0, m if (mode == 2 and reproj) else 0))
+    wts = np.zeros(S)
+    xit = np.zeros(k)
+    Gt = np.zeros(q)
+    Tht = np.zeros(a)
+    gold = np.zeros(E)
+    gnew = np.zeros(E)
+    ev_needG = np.zeros(E, np.bool_)
+    act_th = np.zeros(E)
+    act_e = np.zeros(E, np.int64)
+    sc_y = np.zeros(k + q)
+    f_y = np.zeros(k + q)
     rec_n = 0
     t_rec = np.zeros(0)
-    xi_rec = np.zeros((0, xi0.shape[1]))
-    G_rec = np.zeros((0, G0.shape[1]))
+    xi_rec = np.zeros((0, k))
+    G_rec = np.zeros((0, q))
     for bi in range(lo, hi):
-        # ---------------------------------------------------------------- scratch, once per trajectory
-        n = m if has_g else 0
-        mm = 3 if kind == 1 else (m if kind == 2 else r)
-        F = np.zeros((S, k))
-        hL = np.zeros((S, k))
-        hK = np.zeros((S, a))
-        xi = xi0[bi].copy()
-        G = G0[bi].copy()
-        gam = gamma[bi]
-        xi1 = np.zeros(k)
-        G1 = np.zeros(q)
-        Th = np.zeros(a)
-        Th1 = np.zeros(a)
-        Oa = np.zeros(a)
-        Ea = np.zeros(a)
-        Eg = np.zeros(q)
-        Xi = np.zeros(k)
-        Gam0 = np.zeros(n)
-        Gam = np.zeros(n)
-        z = np.zeros(k + n)
-        Om = np.zeros((m if kind != 3 else 1, m))
-        W = np.zeros(12 * mm * mm)  # flat: viewed as (12, n, n) for the size at hand (_scratch)
-        vb = np.zeros(mm)
-        bufs = np.zeros((3, max(mm * mm, 1)))
-        Q = np.zeros((m if kind == 3 else 0, r))
         if kind == 3:
+            for p in range(m):
+                for j in range(r):
+                    Q[p, j] = 0.0
             Q[m - 1, 0] = 1.0
-        cvec = np.zeros(r)
-        PQ = np.zeros((m if kind == 3 else 0, r))
-        PQ2 = np.zeros((m if kind == 3 else 0, r))
-        Wg = np.zeros((2, m if (mode == 2 and reproj) else 0, m if (mode == 2 and reproj) else 0))
-        wts = np.zeros(S)
-        xit = np.zeros(k)
-        Gt = np.zeros(q)
-        Tht = np.zeros(a)
-        gold = np.zeros(E)
-        gnew = np.zeros(E)
-        ev_needG = np.zeros(E, np.bool_)
-        act_th = np.zeros(E)
-        act_e = np.zeros(E, np.int64)
-        sc_y = np.zeros(N)
-        f_y = np.zeros(N)
+        for c in range(k):
+            xi[c] = xi0[bi, c]
+        for c in range(q):
+            G[c] = G0[bi, c]
+        gam = gamma[bi]
         rec_n = 0
         rec_cap = 64 if record else 0
         t_rec = np.zeros(rec_cap)
         xi_rec = np.zeros((rec_cap, k))
         G_rec = np.zeros((rec_cap, q))
         for e in range(E):
+            ev_needG[e] = False
             for c in range(q):
                 if ev_coef[bi, e, k + c] != 0.0:
                     ev_needG[e] = True
@@ -238,6 +592,7 @@ def _solve_one(lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap,
         tst = t0
         t = t0
         ie = 0
+        NT = t_eval.shape[0]
         if has_g:
             _body_vertical(mode, G, gam, Gam0)
         _field(xi, Gam0, has_g, fidx, fval, z, F[0])
@@ -257,73 +612,18 @@ def _solve_one(lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap,
                 xi_rec[0, :] = xi
                 G_rec[0, :] = G
                 rec_n = 1
-        for e in range(E):
-            acc = -ev_off[bi, e]
-            for c in range(k):
-                acc += ev_coef[bi, e, c] * xi[c]
-            for c in range(q):
-                acc += ev_coef[bi, e, k + c] * G[c]
-            gold[e] = acc
+        _event_values(bi, ev_coef, ev_off, xi, G, gold)
         h = hfix * direction
         if fail == 0 and adaptive and hfix == 0.0:
-            # Hairer's estimate on the embedded state y = (xi, G), f = (xi_dot, group velocity)
-            nc = 1
-            if kind == 3:
-                for p in range(m - 1):
-                    for j in range(1, r):
-                        Q[p, j] = 0.0
-            if group:
-                nc = _omega_alg(kind, skew, xi, widx, wval, Om, Q, nc, cvec, Oa)
-                _alg_state(kind, mode, G, Oa, Eg, Q, nc, r, bufs, PQ, PQ2)
-            for c in range(k):
-                sc_y[c] = _scale(xi[c], xi[c], rtol, atol)
-                f_y[c] = F[0, c]
-            for c in range(q):
-                sc_y[k + c] = _scale(G[c], G[c], rtol, atol)
-                f_y[k + c] = -Eg[c] if mode == 1 else Eg[c]
-            d0 = 0.0
-            d1 = 0.0
-            for c in range(k):
-                d0 += (xi[c] / sc_y[c]) ** 2
-            for c in range(q):
-                d0 += (G[c] / sc_y[k + c]) ** 2
-            for c in range(N):
-                d1 += (f_y[c] / sc_y[c]) ** 2
-            d0 = math.sqrt(d0 / N)
-            d1 = math.sqrt(d1 / N)
-            h0 = _probe_step(d0, d1)
-            hp = h0 * direction
-            for c in range(k):
-                xit[c] = xi[c] + hp * f_y[c]
-            for c in range(q):
-                Gt[c] = G[c] + hp * f_y[k + c]
-            if has_g:
-                _body_vertical(mode, Gt, gam, Gam)
-            _field(xit, Gam, has_g, fidx, fval, z, F[1])
+            h = _first_step(family, kind, skew, mode, has_g, order, direction, rtol, atol, xi, G, gam, F, xit, Gt, Gam,
+                            z, fidx, fval, widx, wval, Om, Q, cvec, Oa, Eg, r, bufs, PQ, PQ2, sc_y, f_y)
             nfev += 1
-            if group:
-                nc = 1
-                if kind == 3:
-                    for p in range(m - 1):
-                        for j in range(1, r):
-                            Q[p, j] = 0.0
-                nc = _omega_alg(kind, skew, xit, widx, wval, Om, Q, nc, cvec, Oa)
-                _alg_state(kind, mode, Gt, Oa, Eg, Q, nc, r, bufs, PQ, PQ2)
-            d2 = 0.0
-            for c in range(k):
-                d2 += ((F[1, c] - f_y[c]) / sc_y[c]) ** 2
-            for c in range(q):
-                v = -Eg[c] if mode == 1 else Eg[c]
-                d2 += ((v - f_y[k + c]) / sc_y[k + c]) ** 2
-            d2 = math.sqrt(d2 / N) / h0
-            h = _initial_step(d0, d1, d2, h0, order) * direction
             if not (h == h):
                 fail = 1
 
         # ---------------------------------------------------------------- the time loop
         after_reject = False
-        i_step = 0
-        nc = 1
+        nc = i1
         if not adaptive and hfix <= 0.0:
             fail = 2
         n_fixed = 0
@@ -354,271 +654,81 @@ def _solve_one(lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap,
                 f0_ok = True
             for c in range(k):
                 hL[0, c] = h * F[0, c]
-            nc = 1
             if kind == 3:
-                for p in range(m - 1):
-                    for j in range(1, r):
-                        Q[p, j] = 0.0
-            if group:
-                nc = _omega_alg(kind, skew, xi, widx, wval, Om, Q, nc, cvec, Oa)
+                _fresh_basis(Q)
+            nc = i1
+            if mode != 0:
+                nc = _omega_alg(family, kind, skew, xi, widx, wval, Om, Q, nc, cvec, Oa)
                 for c in range(a):
                     hK[0, c] = h * Oa[c]
-            ok = True
-            have_new = fsal or new_in  # stage s available after this trial
-            extended = False
-            rejected_now = False
-            i = 1
-            i_hi = s_eval
-            # stages 1 .. s_eval-1 of the trial step and, on demand below, s .. S-1 of an accepted one
-            while True:
-                while i < i_hi:
-                    for c in range(k):
-                        acc = 0.0
-                        for j in range(i):
-                            acc += A[i, j] * hL[j, c]
-                        Xi[c] = xi[c] + acc
-                    if group:
-                        for c in range(a):
-                            acc = 0.0
-                            for j in range(i):
-                                acc += A[i, j] * hK[j, c]
-                            Th[c] = acc
-                        if chart == 0 and skew and not extended and _alg_sq(kind, Th) >= _PI2:
-                            ok = False
-                        if has_g:
-                            _alg_act(kind, chart, skew, Th, -1.0, Gam0, Gam, W, vb, Q, nc, r, bufs)
-                    _field(Xi, Gam, has_g, fidx, fval, z, F[i])
-                    nfev += 1
-                    for c in range(k):
-                        hL[i, c] = h * F[i, c]
-                    if group:
-                        nc = _omega_alg(kind, skew, Xi, widx, wval, Om, Q, nc, cvec, Oa)
-                        _alg_dinv(kind, chart, skew, Th, Oa, h, hK[i], W, bern, nc, r, bufs)
-                    i += 1
-                if extended:  # the continuous extension's stages were just evaluated
-                    break
-                # ------------------------------------------------ the trial step's end and its error
-                for c in range(k):
-                    acc = 0.0
-                    for j in range(s):
-                        acc += bw[j] * hL[j, c]
-                    xi1[c] = xi[c] + acc
-                if group:
-                    for c in range(a):
-                        acc = 0.0
-                        for j in range(s):
-                            acc += bw[j] * hK[j, c]
-                        Th1[c] = acc
-                    if chart == 0 and skew and _alg_sq(kind, Th1) >= _PI2:
-                        ok = False
-                    _alg_update(kind, chart, skew, mode, G, Th1, G1, W, vb, Q, nc, r, bufs, PQ, PQ2)
-                finite = _finite(xi1) and _finite(G1)
-                nrm = 0.0
-                if adaptive:
-                    s5 = 0.0
-                    s3 = 0.0
-                    for e in range(ne):
-                        acc2 = 0.0
-                        for c in range(k):
-                            acc = 0.0
-                            for j in range(s_eval):
-                                acc += err[e, j] * hL[j, c]
-                            v = acc / _scale(xi[c], xi1[c], rtol, atol)
-                            acc2 += v * v
-                        if group:
-                            for c in range(a):
-                                acc = 0.0
-                                for j in range(s_eval):
-                                    acc += err[e, j] * hK[j, c]
-                                Ea[c] = acc
-                            _alg_state(kind, mode, G1, Ea, Eg, Q, nc, r, bufs, PQ, PQ2)
-                            for c in range(q):
-                                v = Eg[c] / _scale(G[c], G1[c], rtol, atol)
-                                acc2 += v * v
-                        if e == 0:
-                            s5 = acc2
-                        else:
-                            s3 = acc2
-                    nrm = _combine(s5, s3, N, ne == 2)
-                    if not ok or not finite:
-                        nrm = np.inf
-                    if not (nrm <= 1.0):
-                        rejected_now = True
-                        break
-                else:
-                    if not finite:  # the field broke down (a NaN chart argument too)
-                        fail = 1
-                        t_fail = t + h
-                        break
-                    if not ok:
-                        fail = 4
-                        t_fail = t
-                        break
-                # ------------------------------------------------ accepted: does its interior matter?
-                t_new = t1 if last else t + h
-                for e in range(E):
-                    acc = -ev_off[bi, e]
-                    for c in range(k):
-                        acc += ev_coef[bi, e, c] * xi1[c]
-                    for c in range(q):
-                        acc += ev_coef[bi, e, k + c] * G1[c]
-                    gnew[e] = acc
-                n_act = 0
-                for e in range(E):
-                    go = gold[e]
-                    gn = gnew[e]
-                    if go == 0.0 and at_start:  # starting on the surface is not a crossing
-                        continue
-                    up = go <= 0.0 and gn >= 0.0 and go != gn
-                    down = go >= 0.0 and gn <= 0.0 and go != gn
-                    d = ev_dir[e]
-                    if (up and d >= 0) or (down and d <= 0):
-                        act_e[n_act] = e
-                        n_act += 1
-                need = n_act > 0 or (ie < NT and direction * (t_eval[ie] - t_new) <= 0.0)
-                if need:  # the continuous extension: stage s (a copy for FSAL methods) and the extra stages
-                    extended = True
-                    if not have_new:
-                        i = s
-                    elif fsal:
-                        for c in range(k):
-                            F[s, c] = F[s - 1, c]
-                            hL[s, c] = hL[s - 1, c]
-                        for c in range(a):
-                            hK[s, c] = hK[s - 1, c]
-                        i = s + 1
-                    else:
-                        i = s + 1
-                    i_hi = S
-                    have_new = True
+            # stages 1 .. s_eval-1 of the trial step
+            nc, ok = _stages(family, kind, chart, skew, mode, has_g, i1, s_eval, s_eval, h, xi, A, F, hL, hK, Xi,
+                             Th, Gam0, Gam, z, fidx, fval, widx, wval, Om, Q, nc, cvec, Oa, W, vb, bern, r, bufs)
+            nfev += s_eval - 1
+            nrm, in_domain, finite = _step_end(family, kind, chart, skew, mode, adaptive, s, s_eval, bw, err, rtol,
+                                               atol, xi, G, hL, hK, xi1, Th1, G1, Ea, Eg, W, vb, Q, nc, r, bufs, PQ,
+                                               PQ2)
+            ok = ok and in_domain
+            if adaptive:
+                if not ok:
+                    nrm = np.inf
+                if not (nrm <= 1.0):
+                    nrej += 1
+                    h = h * _reject_factor(nrm, expo)
+                    after_reject = True
                     continue
-                break
-            if fail != 0:
-                break
-            if rejected_now:
-                nrej += 1
-                h = h * _reject_factor(nrm, expo)
-                after_reject = True
-                continue
-            # ---------------------------------------------------- events, in time order
+            else:
+                if not finite:  # the field broke down (a NaN chart argument too)
+                    fail = 1
+                    t_fail = t + h
+                    break
+                if not ok:
+                    fail = 4
+                    t_fail = t
+                    break
+            # ------------------------------------------------ accepted: does its interior matter?
             nsteps += 1
-            stop_th = 2.0
+            t_new = t1 if last else t + h
+            n_act = 0
+            if E > 0:
+                _event_values(bi, ev_coef, ev_off, xi1, G1, gnew)
+                n_act = _crossings(gold, gnew, at_start, ev_dir, act_e)
+            have_new = fsal or new_in  # stage s is available after the trial step
+            if n_act > 0 or (ie < NT and direction * (t_eval[ie] - t_new) <= 0.0):
+                # the continuous extension: stage s (a copy for FSAL methods) and the extra stages
+                i = s
+                if fsal:
+                    for c in range(k):
+                        F[s, c] = F[s - 1, c]
+                        hL[s, c] = hL[s - 1, c]
+                    for c in range(a):
+                        hK[s, c] = hK[s - 1, c]
+                    i = s + 1
+                elif have_new:
+                    i = s + 1
+                nc, _ = _stages(family, kind, chart, skew, mode, has_g, i, S, s_eval, h, xi, A, F, hL, hK, Xi, Th, Gam0,
+                                Gam, z, fidx, fval, widx, wval, Om, Q, nc, cvec, Oa, W, vb, bern, r, bufs)
+                nfev += S - i
+                have_new = True
+            # ---------------------------------------------------- events, in time order
             if n_act > 0:
-                for ia in range(n_act):
-                    e = act_e[ia]
-                    # Illinois on theta in [0, 1]: f(0) = gold, f(1) = gnew
-                    lo = 0.0
-                    hi = 1.0
-                    flo = gold[e]
-                    fhi = gnew[e]
-                    tlo = flo
-                    thi = fhi
-                    side = 0
-                    root = -1.0
-                    if flo == 0.0:
-                        root = 0.0
-                    elif fhi == 0.0:
-                        root = 1.0
-                    for _it in range(300):
-                        if root >= 0.0:
-                            break
-                        cth = (lo * fhi - hi * flo) / (fhi - flo)
-                        if not (lo < cth < hi):
-                            cth = 0.5 * (lo + hi)
-                        if cth <= lo or cth >= hi:
-                            break
-                        # the value at cth, on the continuous extension
-                        _dense_at(cth, dense, wts, xi, hL, hK, xit, Tht)
-                        fc = -ev_off[bi, e]
-                        for c in range(k):
-                            fc += ev_coef[bi, e, c] * xit[c]
-                        if ev_needG[e]:
-                            _alg_update(kind, chart, skew, mode, G, Tht, Gt, W, vb, Q, nc, r, bufs, PQ, PQ2)
-                            for c in range(q):
-                                fc += ev_coef[bi, e, k + c] * Gt[c]
-                        if fc == 0.0:
-                            root = cth
-                            break
-                        if (fc > 0.0) == (fhi > 0.0):
-                            hi = cth
-                            fhi = fc
-                            thi = fc
-                            if side == 1:
-                                flo *= 0.5
-                            side = 1
-                        else:
-                            lo = cth
-                            flo = fc
-                            tlo = fc
-                            if side == -1:
-                                fhi *= 0.5
-                            side = -1
-                        if abs(h) * (hi - lo) <= 4.0 * _ulp(t + cth * h, direction):
-                            break
-                    if root < 0.0:
-                        root = lo if abs(tlo) < abs(thi) else hi
-                    act_th[ia] = root
-                # insertion sort by theta (ties: event order)
-                for ia in range(1, n_act):
-                    j = ia
-                    while j > 0 and act_th[j - 1] > act_th[j]:
-                        tmp = act_th[j - 1]
-                        act_th[j - 1] = act_th[j]
-                        act_th[j] = tmp
-                        tmpe = act_e[j - 1]
-                        act_e[j - 1] = act_e[j]
-                        act_e[j] = tmpe
-                        j -= 1
-                for ia in range(n_act):
-                    e = act_e[ia]
-                    th_ = act_th[ia]
-                    if st == 1 and th_ > stop_th:
-                        break
-                    te = t_new if th_ == 1.0 else t + th_ * h
-                    if th_ == 1.0:
-                        for c in range(k):
-                            xit[c] = xi1[c]
-                        for c in range(q):
-                            Gt[c] = G1[c]
-                    else:
-                        _dense_at(th_, dense, wts, xi, hL, hK, xit, Tht)
-                        if group:
-                            _alg_update(kind, chart, skew, mode, G, Tht, Gt, W, vb, Q, nc, r, bufs, PQ, PQ2)
-                    cnt = ev_count[bi, e]
-                    if cnt < cap:
-                        ev_t[bi, e, cnt] = te
-                        for c in range(k):
-                            ev_xi[bi, e, cnt, c] = xit[c]
-                        for c in range(q):
-                            ev_G[bi, e, cnt, c] = Gt[c]
-                    ev_count[bi, e] = cnt + 1
-                    if ev_term[e] != 0 and st == 0:
-                        st = 1
-                        tst = te
-                        stop_th = th_
+                terminal, t_ev = _locate(family, kind, chart, skew, mode, bi, n_act, act_e, act_th, gold, gnew,
+                                         ev_needG, ev_coef, ev_off, ev_term, cap, ev_count, ev_t, ev_xi, ev_G, t, h,
+                                         t_new, direction, dense, wts, xi, G, xi1, G1, hL, hK, xit, Tht, Gt, W, vb, Q,
+                                         nc, r, bufs, PQ, PQ2)
+                if terminal:
+                    st = 1
+                    tst = t_ev
             # ---------------------------------------------------- outputs (t_eval, record)
-            t_lim = tst if st == 1 else t_new
-            while ie < NT and direction * (t_eval[ie] - t_lim) <= 0.0:
-                te = t_eval[ie]
-                if te == t_new:
-                    for c in range(k):
-                        xi_out[ie, bi, c] = xi1[c]
-                    for c in range(q):
-                        G_out[ie, bi, c] = G1[c]
-                else:
-                    _dense_at((te - t) / h, dense, wts, xi, hL, hK, xit, Tht)
-                    for c in range(k):
-                        xi_out[ie, bi, c] = xit[c]
-                    if group:
-                        _alg_update(kind, chart, skew, mode, G, Tht, Gt, W, vb, Q, nc, r, bufs, PQ, PQ2)
-                        for c in range(q):
-                            G_out[ie, bi, c] = Gt[c]
-                ie += 1
+            if ie < NT:
+                t_lim = tst if st == 1 else t_new
+                ie = _outputs(family, kind, chart, skew, mode, bi, ie, t_eval, t_lim, t, h, t_new,
+                              direction, dense, wts, xi, G, xi1, G1, hL, hK, xit, Tht, Gt, W, vb, Q, nc, r, bufs, PQ,
+                              PQ2, xi_out, G_out)
             if st == 1:
                 break
             # ---------------------------------------------------- advance
             t = t_new
-            i_step += 1
             for c in range(k):
                 xi[c] = xi1[c]
             for c in range(q):
@@ -632,18 +742,9 @@ def _solve_one(lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap,
             else:
                 f0_ok = False
             at_start = False
-            if reproj and group and nsteps % renorm == 0:
+            if reproj and mode != 0 and nsteps % renorm == 0:
                 f0_ok = False  # the state moved: stage 0 is evaluated again
-                if mode == 2:
-                    Gm = G.reshape((m, m))
-                    _polar_step(Gm, Wg[0], Wg[1])
-                elif mode == 1:
-                    acc = 0.0
-                    for c in range(q):
-                        acc += G[c] * G[c]
-                    nr = math.sqrt(acc)
-                    for c in range(q):
-                        G[c] = G[c] / nr
+                _reproject(mode, G, Wg)
             if record:
                 if rec_n == rec_cap:
                     rec_cap *= 2
@@ -676,17 +777,18 @@ def _solve_one(lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap,
     return t_rec[:rec_n].copy(), xi_rec[:rec_n].copy(), G_rec[:rec_n].copy()
 
 
-def _solve_batch(*args) -> None:
-    """Every trajectory of the batch, in contiguous chunks over the cores: the jitted loop releases the GIL,
-    so threads run the chunks in parallel (no parfor to compile; no reduction across trajectories, so a
-    trajectory's numbers do not depend on the chunking)."""
+def _solve_batch(solve_one, *args) -> None:
+    """Every trajectory of the batch, in contiguous chunks over the cores: ``solve_one(lo, hi, *args)`` (the
+    compiled :func:`_solve_one` of the problem's kind) releases the GIL, so threads run the chunks in parallel
+    (no parfor to compile; no reduction across trajectories, so a trajectory's numbers do not depend on the
+    chunking)."""
     B = args[2].shape[0]
     workers = min(B, numba.config.NUMBA_NUM_THREADS, os.cpu_count() or 1)
     if workers <= 1:
-        _solve_one(0, B, *args)
+        solve_one(0, B, *args)
         return
     bounds = np.linspace(0, B, 4 * workers + 1).astype(np.int64)
     from concurrent.futures import ThreadPoolExecutor
 
     with ThreadPoolExecutor(workers) as pool:
-        list(pool.map(lambda c: _solve_one(int(bounds[c]), int(bounds[c + 1]), *args), range(len(bounds) - 1)))
+        list(pool.map(lambda c: solve_one(int(bounds[c]), int(bounds[c + 1]), *args), range(len(bounds) - 1)))

@@ -57,6 +57,7 @@ def _so4_pair(Om, out):
     out[5] = 0.5 * (x03 - x12)
 
 
+@_jit
 def _so4_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
     """out = (p, q) of Omega(x): the upper triangle of the probed linear map (rows ``(a, r, c)``, r < c)."""
     for i in range(4):
@@ -68,6 +69,7 @@ def _so4_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
     return nc
 
 
+@_jit
 def _so4_sq(kind, Th):
     """|Theta|_F^2 / 2 = 2 (|p|^2 + |q|^2): what the dense kind computes from the matrix."""
     acc = 0.0
@@ -76,6 +78,7 @@ def _so4_sq(kind, Th):
     return 2.0 * acc
 
 
+@_jit
 def _so4_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
     """out = h dphi^{-1}_{-Th}(Om): exp the truncated series on each factor (the terms of ``bern``, rows
     ``(k, B_k/k!)`` for k >= 1), Cayley exact."""
@@ -128,6 +131,7 @@ def _so4_rotate(chart, Th, sign, v, out):
     out[3] = u[3]
 
 
+@_jit
 def _so4_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
     _so4_rotate(chart, Th, sign, v, out)
 
@@ -144,6 +148,7 @@ def _mul_right(G, M, out):
         out[4 * i + 3] = g0 * m03 + g1 * m13 + g2 * m23 + g3 * m33
 
 
+@_jit
 def _so4_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
     """``g phi(Th)`` (mode g, g flat row-major) or ``phi(-Th) Gamma`` (mode gamma)."""
     if mode == 1:
@@ -158,6 +163,7 @@ def _so4_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ
     _mul_right(G, M, out)
 
 
+@_jit
 def _so4_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
     """``g1 E`` (mode g, 16 entries) or ``E Gamma1`` (mode gamma, 4), E the matrix of the pair Ea."""
     E = _so4_mat_c((0.0, 1.0, 1.0, 0.0), (Ea[0], Ea[1], Ea[2]), (Ea[3], Ea[4], Ea[5]))

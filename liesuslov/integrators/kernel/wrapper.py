@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numba import njit
 
@@ -17,6 +18,7 @@ from .common import (
     _NHEAD,
     CHARTS,
     EVENT_CAP,
+    FAMILIES,
     KINDS,
     LOWRANK_MIN_N,
     MODES,
@@ -114,6 +116,26 @@ def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool):
     return np.ascontiguousarray(iprm), np.ascontiguousarray(fprm)
 
 
+_LOOPS: dict = {}
+
+
+def _compiled(family: int, args: tuple):
+    """The compiled :func:`~.loop._solve_one` of ``family`` (:data:`~.common.FAMILIES`), as ``f(lo, hi, *args)``.
+
+    Compiled (or loaded from numba's on-disk cache) on first use with the family as a literal, then called
+    through its entry point: a plain call with an int would make the dispatcher type the loop again on every
+    call to find the literal specialisation (~10 ms). The argument types do not vary: :func:`solve` makes
+    every array C-contiguous float64 or int64 of a fixed number of dimensions.
+    """
+    entry = _LOOPS.get(family)
+    if entry is None:
+        sig = (numba.types.literal(family), numba.types.int64, numba.types.int64) + tuple(numba.typeof(a) for a in args)
+        _solve_one.compile(sig)
+        compiled = _solve_one.overloads[sig].entry_point
+        entry = _LOOPS[family] = lambda lo, hi, *rest: compiled(family, lo, hi, *rest)
+    return entry
+
+
 def solve(problem: Problem) -> RawResult:
     """Integrate ``problem`` on the compiled kernel (see the module docstring); ``RawResult.backend == "numba"``."""
     kind, cplan = _prepare(problem)
@@ -122,14 +144,15 @@ def solve(problem: Problem) -> RawResult:
     if record and B != 1:
         raise ValueError("t_eval=None (record every step) needs a single trajectory")
     iprm, fprm = _pack(problem, kind, cplan, record)
-    xi0 = np.ascontiguousarray(problem.xi0, dtype=float).reshape(B, k)
-    G0 = np.ascontiguousarray(problem.G0, dtype=float).reshape(B, q)
-    gamma = np.ascontiguousarray(problem.gamma, dtype=float).reshape(B, -1)
-    t_eval = np.zeros(0) if record else np.ascontiguousarray(problem.t_eval, dtype=float)
+    # fresh C-contiguous writable copies: the compiled loop's argument types never vary (see _compiled)
+    xi0 = np.array(problem.xi0, dtype=float, order="C").reshape(B, k)
+    G0 = np.array(problem.G0, dtype=float, order="C").reshape(B, q)
+    gamma = np.array(problem.gamma, dtype=float, order="C").reshape(B, -1)
+    t_eval = np.zeros(0) if record else np.array(problem.t_eval, dtype=float, order="C")
     E = int(iprm[_I_NEV])
     if E:
-        ev_coef = np.ascontiguousarray(problem.event_coef, dtype=float).reshape(B, E, k + q)
-        ev_off = np.ascontiguousarray(problem.event_offset, dtype=float).reshape(B, E)
+        ev_coef = np.array(problem.event_coef, dtype=float, order="C").reshape(B, E, k + q)
+        ev_off = np.array(problem.event_offset, dtype=float, order="C").reshape(B, E)
     else:
         ev_coef, ev_off = np.zeros((B, 0, k + q)), np.zeros((B, 0))
     cap = EVENT_CAP if E else 0
@@ -149,10 +172,11 @@ def solve(problem: Problem) -> RawResult:
         ev_G = np.zeros((B, E, cap, q))
         args = (iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap, xi_out, G_out, status, t_stop,
                 failure, nfev, steps, rejected, ev_count, ev_t, ev_xi, ev_G)
+        solve_one = _compiled(FAMILIES[KINDS[kind]], args)
         if record:
-            t_rec, xi_rec, G_rec = _solve_one(0, 1, *args)
+            t_rec, xi_rec, G_rec = solve_one(0, 1, *args)
         else:
-            _solve_batch(*args)
+            _solve_batch(solve_one, *args)
         top = int(ev_count.max(initial=0))
         if top <= cap:
             break
