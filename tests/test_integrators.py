@@ -253,14 +253,14 @@ def test_bad_omega_and_span():
 # ----------------------------------------------------------------------------- chart kernels against the dense path
 def _run_stepper(model, n, method, chart, mode, B, kind, steps=4, h=0.05, seed=0):
     """``steps`` RKMK steps with the kernel ``kind``: (xi, G, dense state at theta = 0.4, scaled error sums)
-    after each, and nfev."""
+    after each, and nfev per trajectory."""
     from liesuslov.integrators.charts import make_chart
     from liesuslov.integrators.plan import make_plan
     from liesuslov.integrators.rkmk import RKMKStepper
 
     tab = get_tableau(method)
     plan = make_plan(tab)
-    st = RKMKStepper(model, plan, make_chart(chart, n, skew=True, order=tab.order, kind=kind), mode, B,
+    st = RKMKStepper(model, plan, make_chart(chart, n, skew=True, order=tab.order, kind=kind), mode,
                      rtol=1e-6, atol=1e-8)
     rng = np.random.default_rng(seed)
     xi = 0.7 * rng.standard_normal((B, model.k))
@@ -268,17 +268,22 @@ def _run_stepper(model, n, method, chart, mode, B, kind, steps=4, h=0.05, seed=0
     gam = rng.standard_normal((B, n))
     gam /= np.linalg.norm(gam, axis=-1, keepdims=True)
     G = np.linalg.qr(rng.standard_normal((B, n, n)))[0] if mode == "g" else gam.copy()
-    out = []
+    gamma = gam if (mode == "g" and model.has_gamma) else None
+    out, nfev, f0 = [], np.zeros(B, np.int64), None
     for _ in range(steps):
-        xi1, G1, err, ok = st.trial(h, xi, G, gam if (mode == "g" and model.has_gamma) else None)
-        assert ok
-        st.complete()
-        xd, Gd = st.dense(0.4, xi, G, h)
-        st.accept()
-        sq = [] if err is None else [np.asarray(e) for e in err]
-        out.append((np.array(xi1), np.array(G1), np.array(Gd), sq))
-        xi, G = xi1, G1
-    return out, st.nfev, st.kernel
+        if f0 is None:
+            f0 = st.field(xi, G, gamma)
+            nfev += 1
+        step = st.trial(np.full(B, h), xi, G, gamma, f0)
+        assert np.all(step.ok)
+        nfev += plan.step_stages - 1 + plan.S - step.done
+        st.complete(step)
+        xd, Gd = st.dense(step, np.full(B, 0.4), np.arange(B))
+        f0 = st.new_point_field(step)
+        sq = [] if step.err is None else [np.asarray(e) for e in step.err]
+        out.append((np.array(step.xi1), np.array(step.G1), np.array(Gd), sq))
+        xi, G = step.xi1, step.G1
+    return out, tuple(nfev.tolist()), st.kernel
 
 
 def _kernel_scenes():
@@ -330,9 +335,9 @@ def test_default_kernels_and_forcing():
     assert make_chart("exp", 20, skew=True, order=4).default_kernel(multiplier) == "dense"
     assert make_chart("exp", 20, skew=True, order=4).default_kernel(general_scene(20)[0].model()) == "lowrank"
     with pytest.raises(ValueError, match="lowrank"):
-        make_chart("exp", 20, skew=True, order=4, kind="lowrank").kernel(multiplier, 1, 4, need_act=True)
+        make_chart("exp", 20, skew=True, order=4, kind="lowrank").kernel(multiplier, 4, need_act=True)
     with pytest.raises(ValueError, match="so4"):
-        make_chart("exp", 5, skew=True, order=4, kind="so4").kernel(kt_scene(5)[0].model(), 1, 4, need_act=True)
+        make_chart("exp", 5, skew=True, order=4, kind="so4").kernel(kt_scene(5)[0].model(), 4, need_act=True)
     with pytest.raises(ValueError, match="kind"):
         make_chart("exp", 5, skew=True, order=4, kind="fast")
 

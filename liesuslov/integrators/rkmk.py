@@ -1,19 +1,32 @@
-"""The numpy RKMK stepper: one trajectory's step on a :class:`~.plan.StagePlan`, readable, the reference.
+"""The numpy RKMK stepper: trial steps of a batch, each trajectory with its own step size — readable, the reference.
 
-The state is ``(xi, G)`` (see :mod:`.problem`). Stage i (plan numbering, ``h`` the step):
+The state of a trajectory is ``(xi, G)`` (see :mod:`.problem`). Stage i (plan numbering, ``h`` the step):
 
-    Xi_i = xi + h sum_j A[i, j] L_j,      Theta_i = h sum_j A[i, j] K_j,      Gamma_i = phi(-Theta_i) Gamma,
+    Xi_i = xi + sum_j (A[i, j] h) L_j,    Theta_i = sum_j (A[i, j] h) K_j,    Gamma_i = phi(-Theta_i) Gamma,
     L_i = f(Xi_i, Gamma_i),               K_i = dphi^{-1}_{-Theta_i}(Omega(Xi_i)),
 
-then ``xi1 = xi + h sum_j b_j L_j``, ``Theta1 = h sum_j b_j K_j``, ``g1 = g phi(Theta1)`` or
-``Gamma1 = phi(-Theta1) Gamma``; the embedded estimates are ``h sum_j err_j (L_j, K_j)`` and the continuous
-extension ``xi(theta) = xi + h sum_j b_j(theta) L_j``, ``Theta(theta) = h sum_j b_j(theta) K_j``.
+then ``xi1 = xi + sum_j (b_j h) L_j``, ``Theta1 = sum_j (b_j h) K_j``, ``g1 = g phi(Theta1)`` or
+``Gamma1 = phi(-Theta1) Gamma``; the embedded estimates are ``sum_j (err_j h) (L_j, K_j)`` and the
+continuous extension ``xi(theta) = xi + sum_j (h b_j(theta)) L_j``, ``Theta(theta) = sum_j (h b_j(theta)) K_j``.
 
-Layout: row 0 of one buffer ``Z`` holds ``(xi, 0)``, row ``1 + j`` holds ``(L_j, K_j)``; a stage's
-argument is one product of the coefficient row ``(1, h A[i, :i])`` with the rows above it. The chart's
-kernel (:meth:`~.charts.Chart.kernel`) fixes how an algebra element is stored in a row — rotation vectors
-for so(3), the pair (p, q) for so(4), coordinates for small so(n), r×r coordinates in a per-step basis for
-Fedorov–Kozlov models, matrices otherwise — and does the chart's work on it (closed forms where they exist).
+Layout: a trial step of B trajectories keeps one buffer ``Z`` (1 + S, k + q, B): row 0 holds ``(xi, 0)``,
+row ``1 + j`` holds ``(L_j, K_j)``, every row component-major — one contiguous (B,) line per component —
+so that the per-trajectory coefficient ``A[i, j] h`` (h a (B,) array) broadcasts along the batch and a
+stage's argument is an elementwise sum over the rows above it, in a fixed order (j increasing, exact zero
+coefficients skipped). The chart's kernel (:meth:`~.charts.Chart.kernel`) fixes what the q numbers of
+the chart part are — rotation vectors for so(3), the pair (p, q) for so(4), coordinates for small so(n),
+r×r coordinates in a per-step basis for Fedorov–Kozlov models, matrices otherwise — and does the chart's
+work on them (closed forms where they exist).
+
+Batch = alone, bitwise: a trajectory's numbers depend on its own state and step only. Every operation is
+elementwise along the batch, a reduction along one trajectory's own contiguous numbers, or a stacked
+product (``np.matmul`` / ``np.linalg.solve`` on (B, ·, ·) arrays: one product per matrix); nothing is a
+BLAS product with the batch as a matrix dimension (its blocking, hence its rounding, changes with B). The
+model is called with ``xi`` of shape (B, 1, k) and ``Gamma`` (B, 1, n), C-contiguous: the batch is a
+leading axis, so a model that multiplies by a matrix (``xi @ W``) runs one product per trajectory too
+(numpy's stacked product; a (B, k) operand would make it one BLAS product over the batch). One
+trajectory is a batch of one, on the same code (the so(3)/so(4) kernels hold its numbers as Python
+floats: the same IEEE operations, see :mod:`.charts`).
 
 The compiled kernel (:mod:`.kernel`) runs the same plan, controller and norm (:mod:`.control`) per
 trajectory without Python; this stepper is what the tests compare it against, and what runs user
@@ -22,19 +35,75 @@ callables (a custom potential, an event function).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from . import control
 from .charts import Chart, body_vertical, make_chart
 from .plan import StagePlan, dense_weights
 
-__all__ = ["RKMKStepper"]
+__all__ = ["RKMKStepper", "Step"]
+
+
+def _terms(w: np.ndarray, coef: list) -> list[tuple[int, int]]:
+    """The nonzero entries of a weight row, in order, as ``(j, c)``: stage j with the coefficient ``coef[c]``
+    (appended to ``coef``)."""
+    out = []
+    for j, x in enumerate(w):
+        if x != 0.0:
+            out.append((j, len(coef)))
+            coef.append(float(x))
+    return out
+
+
+class Step:
+    """A trial step of a batch of B trajectories: what the error, the extension and the dense states read.
+
+    Attributes
+    ----------
+    h : (B,)
+        Signed step sizes.
+    hc : (T, B)
+        The stepper's nonzero coefficients (the plan's A, b, err) times h, for the whole step at once.
+    xi, G, gamma : (B, k); (B, m, m), (B, n) or None; (B, n) or None
+        The state at the start of the step (and the vertical in space).
+    Z : (1 + S, k + q, B)
+        The stage buffer (see the module docstring); rows past ``done`` are not evaluated.
+    ctx : kernel context
+        The chart kernel's per-step data (the vertical at the start, the low-rank basis).
+    done : int
+        Stages evaluated (the same for every trajectory of the step).
+    xi1, G1 : (B, k); like G
+        The state at the end of the step.
+    ok : (B,) bool
+        Every chart argument of the step was inside the chart's domain.
+    err : tuple of two (B,) arrays, or None
+        ``(s5, s3)``: scaled sums of squares of the estimates (see :mod:`.control`); None for fixed-step methods.
+    """
+
+    __slots__ = ("h", "hc", "xi", "G", "gamma", "Z", "ctx", "done", "xi1", "G1", "ok", "err")
+
+    def take(self, rows: np.ndarray) -> Step:
+        """The trajectories ``rows`` of this step (indices, possibly repeated), as a step of their own: copies."""
+        sub = Step()
+        sub.h, sub.hc, sub.Z, sub.done = self.h[rows], self.hc[:, rows], self.Z[:, :, rows], self.done
+        sub.xi = self.xi[rows]
+        sub.G = None if self.G is None else self.G[rows]
+        sub.gamma = None if self.gamma is None else self.gamma[rows]
+        sub.ctx = None if self.ctx is None else self.ctx.take(rows)
+        sub.xi1 = self.xi1[rows]
+        sub.G1 = None if self.G1 is None else self.G1[rows]
+        sub.ok = self.ok[rows]
+        sub.err = None if self.err is None else tuple(e[rows] for e in self.err)
+        return sub
 
 
 class RKMKStepper:
-    """Steps of one method for a batch of ``B`` trajectories sharing one step size (the solver uses B = 1).
+    """Trial steps of one method for a batch of trajectories, each with its own step size.
+
+    The batch is whatever the arrays given carry (B = 1 included, on the same code). Field evaluations are
+    counted by the caller (per trajectory, following the plan's new-point rule): a trial step evaluates
+    ``plan.step_stages - 1`` stages besides stage 0 (the caller's ``f0``), :meth:`complete` the remaining
+    ``plan.S - step.done``.
 
     Parameters
     ----------
@@ -43,188 +112,210 @@ class RKMKStepper:
     chart : Chart, {"exp", "cayley"} or None
         None when ``mode == "none"``.
     mode : {"g", "gamma", "none"}
-    batch : int
     kind : str, optional
         Force the chart's kernel ("so3", "so4", "coords", "lowrank", "dense").
+    rtol, atol : float
+        The tolerances of the error norm.
 
     Attributes
     ----------
-    nfev : int
-        Field evaluations (one batched call counts once), following the plan's new-point rule.
     kernel : str or None
         The chart kernel in use.
     """
 
-    def __init__(self, model, plan: StagePlan, chart: Chart | str | None, mode: str, batch: int = 1,
-                 kind: str | None = None, rtol: float = 1e-8, atol: float = 1e-10) -> None:
+    def __init__(self, model, plan: StagePlan, chart: Chart | str | None, mode: str, kind: str | None = None,
+                 rtol: float = 1e-8, atol: float = 1e-10) -> None:
         self.model, self.plan, self.mode = model, plan, mode
         self.rtol, self.atol = rtol, atol
-        self.B = B = int(batch)
-        self.k = k = int(model.k)
-        self.m = int(model.n) if mode != "none" else 0
-        self.nfev = 0
+        self.k = int(model.k)
         self._f = model.xi_dot
         self._has_gamma = bool(model.has_gamma) and mode != "none"
-        S = plan.S
         if mode != "none":
             if chart is None or isinstance(chart, str):
-                chart = make_chart(chart or "exp", self.m, skew=model.algebra.name.startswith("so("),
+                chart = make_chart(chart or "exp", int(model.n), skew=model.algebra.name.startswith("so("),
                                    order=plan.order)
-            self.kern = chart.kernel(model, B, S, need_act=self._has_gamma, kind=kind)
+            self.kern = chart.kernel(model, plan.S, need_act=self._has_gamma, kind=kind)
             self.kernel = type(self.kern).__name__.strip("_").replace("Kernel", "").lower()
         else:
             self.kern, self.kernel = None, None
         self.chart = chart
-        q = self.kern.q if self.kern is not None else 0
-        self.nk = nk = B * k
-        N = nk + B * q
-        self.Z = Z = np.zeros((1 + S, N))
-        self._xv = (lambda row: row.reshape(B, k)) if B == 1 else (lambda row: row.reshape(k, B).T)
-        self._L = [self._xv(Z[1 + j, :nk]) for j in range(S)]
-        self._K = [self.kern.slot(Z[1 + j, nk:]) for j in range(S)] if self.kern is not None else None
-        self._zbuf = np.zeros((S, N))  # stage arguments (Xi_i, Theta_i)
-        self._C = np.zeros((S, 1 + S))  # coefficient rows (1, h A[i, :i]) for the current h
-        self._h = None
-        self._first = None  # the field at the current point (stage 0 of the next step)
-        self.done = 0  # stages evaluated in the current step
+        self.q = self.kern.q if self.kern is not None else 0
+        S = plan.S
+        coef: list[float] = []
+        self._A = [_terms(plan.A[i, :i], coef) for i in range(S)]  # stage i's nonzero coefficients
+        self._b = _terms(plan.b, coef)
+        self._err = [_terms(w, coef) for w in plan.err]
+        self._coef = np.array(coef)[:, None]
+        self._dense = [j for j in range(S) if np.any(plan.dense[j] != 0.0)]  # stages the extension reads
+        self._exp = chart is not None and chart.name == "exp"
 
-    # ------------------------------------------------------------------ state
-    def reset(self) -> None:
-        """Forget the cached field value (the state was changed from outside)."""
-        self._first = None
-
+    # ------------------------------------------------------------------ the field
     def vertical(self, G: np.ndarray | None, gamma: np.ndarray | None) -> np.ndarray | None:
-        """The body vertical at the current point: ``G`` (mode "gamma"), ``g^T gamma`` (mode "g"), or None."""
+        """The body vertical the model reads: ``G`` (mode "gamma"), ``g^T gamma`` (mode "g"), or None."""
         if not self._has_gamma:
             return None
         return G if self.mode == "gamma" else body_vertical(G, gamma)
 
+    def _eval(self, X: np.ndarray, Gam: np.ndarray | None) -> np.ndarray:
+        """The model at ``X`` (B, 1, k) C-contiguous and ``Gam`` (B, n) or None -> (B, k)."""
+        G3 = None if Gam is None else np.ascontiguousarray(Gam).reshape(X.shape[0], 1, -1)
+        return np.asarray(self._f(X, G3)).reshape(X.shape[0], self.k)
+
     def field(self, xi: np.ndarray, G, gamma) -> np.ndarray:
-        """The field at the current point (stage 0; evaluated once and kept until the state moves)."""
-        if self._first is None:
-            self._first = self._f(xi, self.vertical(G, gamma))
-            self.nfev += 1
-        return self._first
+        """The field at the points ``(xi (B, k), G)``: (B, k), one evaluation per trajectory."""
+        X = np.ascontiguousarray(xi).reshape(xi.shape[0], 1, self.k)
+        return self._eval(X, self.vertical(G, gamma))
 
     # ------------------------------------------------------------------ stages
-    def _stage(self, i: int) -> bool:
-        """Evaluate stage i >= 1 from the rows above it; False when its chart argument is out of the domain."""
-        Zi = self._zbuf[i]
-        np.matmul(self._C[i, : i + 1], self.Z[: i + 1], out=Zi)
-        Xi = self._xv(Zi[: self.nk])
-        kern = self.kern
+    @staticmethod
+    def _sum(step: Step, terms, base: bool) -> np.ndarray:
+        """``Z[0] + sum_j (w_j h) Z[1 + j]`` (``base``) or the sum alone, over ``terms`` (see :func:`_terms`),
+        in order: (k + q, B), elementwise along the batch."""
+        Z, hc = step.Z, step.hc
+        acc = Z[0] if base else None
+        for j, c in terms:
+            term = hc[c] * Z[1 + j]
+            acc = term if acc is None else acc + term
+        return np.zeros_like(Z[0]) if acc is None else acc
+
+    def _stage(self, step: Step, i: int) -> np.ndarray:
+        """Evaluate stage i >= 1 from the rows above it; returns its argument (k + q, B) and, for the
+        exponential, clears ``step.ok`` where the chart argument is out of the domain."""
+        k, kern, ctx = self.k, self.kern, step.ctx
+        z = self._sum(step, self._A[i], base=True)
+        B = z.shape[1]
+        X = np.ascontiguousarray(z[:k].T).reshape(B, 1, k)  # the model's input (see the module docstring)
+        row = step.Z[1 + i]
         if kern is None:
-            self._L[i][...] = self._f(Xi, None)
-            self.nfev += 1
-            return True
-        flat = Zi[self.nk:]
-        t = kern.load(flat)
-        self._L[i][...] = self._f(Xi, kern.act(t) if self._has_gamma else None)
-        self.nfev += 1
-        kern.dinv(t, kern.omega(i, Xi), self._K[i])
-        return self._in_domain(flat)
+            row[:k] = self._eval(X, None).T
+            return z
+        t = kern.load(ctx, z[k:])
+        row[:k] = self._eval(X, kern.act(ctx, t) if self._has_gamma else None).T
+        kern.dinv(ctx, t, kern.omega(ctx, z[:k], X), row[k:])
+        self._check_domain(step, t)
+        return z
 
-    def _in_domain(self, flat: np.ndarray) -> bool:
-        """``|Theta|_F / sqrt 2 < pi`` for the exponential (a bound on the largest rotation angle; the
-        exponential's dexp⁻¹ has its first pole at angle 2 pi and the closed forms lose accuracy past pi)."""
-        if self.chart.name != "exp":
-            return True
-        e = self.kern.error(flat).ravel()
-        return bool(e @ e < 2.0 * math.pi ** 2)  # NaN: False
+    def _check_domain(self, step: Step, t) -> None:
+        """Clear ``step.ok`` where ``|Theta|_F / sqrt 2 >= pi``, for the exponential: a bound on the largest
+        rotation angle (dexp⁻¹ has its first pole at angle 2 pi, and the closed forms lose accuracy past pi)."""
+        if self._exp:
+            ok = self.kern.in_domain(t)
+            if ok is True or ok is False:  # one trajectory (float lanes)
+                step.ok[0] &= ok
+            else:
+                step.ok &= ok
 
-    def _combine(self, w: np.ndarray, h: float, base: float = 1.0) -> np.ndarray:
-        """``base * row0 + h sum_j w_j row_{1+j}``: (S,) weights -> one row (xi part and chart part)."""
-        c = np.empty(1 + self.plan.S)
-        c[0] = base
-        c[1:] = h * w
-        return c @ self.Z
+    def trial(self, h: np.ndarray, xi: np.ndarray, G, gamma, f0: np.ndarray) -> Step:
+        """One trial step of each trajectory; the state is not modified.
 
-    def trial(self, h: float, xi: np.ndarray, G, gamma) -> tuple:
-        """One trial step of size h (negative backward); the state is not modified.
+        Parameters
+        ----------
+        h : (B,)
+            Signed step sizes (one per trajectory; 0 gives a harmless step nobody reads).
+        xi : (B, k)
+        G : (B, m, m), (B, n) or None
+            The attitude (mode "g"), the vertical (mode "gamma"), or None.
+        gamma : (B, n) or None
+            The vertical in space (mode "g" with a vertical).
+        f0 : (B, k)
+            The field at the start (stage 0: the caller evaluates or reuses it).
 
         Returns
         -------
-        xi1 : (B, k)
-        G1 : like G, or None
-        err : (2,) or (B, ...) tuple ``(s5, s3)`` of scaled sums of squares (see :mod:`.control`), or None for
-            fixed-step methods
-        in_domain : bool
-            Every chart argument of the step was inside the chart's domain.
+        Step
+            With ``xi1``, ``G1``, ``ok`` and ``err`` (see :class:`Step`).
         """
-        plan, kern = self.plan, self.kern
-        if h != self._h:
-            self._C[:] = 0.0
-            self._C[:, 0] = 1.0
-            self._C[:, 1:] = h * plan.A
-            self._h = h
-        self.Z[0, : self.nk] = xi.reshape(-1) if self.B == 1 else xi.T.reshape(-1)
-        self.Z[0, self.nk:] = 0.0
+        plan, kern, k = self.plan, self.kern, self.k
+        B = xi.shape[0]
+        step = Step()
+        step.h = np.asarray(h, dtype=float)
+        step.hc = self._coef * step.h  # (A[i, j] h) for every coefficient of the step: one product
+        step.xi, step.G, step.gamma = xi, G, gamma
+        step.Z = Z = np.empty((1 + plan.S, k + self.q, B))  # a row is read only once its stage is evaluated
+        Z[0, :k] = xi.T
+        Z[0, k:] = 0.0
+        Z[1, :k] = f0.T
+        step.ok = np.ones(B, dtype=bool)
+        step.ctx = None
         if kern is not None:
-            kern.begin(G, gamma if self._has_gamma else None, self.mode)
-        self._L[0][...] = self.field(xi, G, gamma)
-        if kern is not None:
-            kern.first(kern.omega(0, xi), self._K[0])
-        ok = True
+            step.ctx = kern.begin(G, gamma if self._has_gamma else None, self.mode)
+            X = np.ascontiguousarray(xi).reshape(B, 1, k)
+            kern.first(kern.omega(step.ctx, Z[0, :k], X), Z[1, k:])
         s = plan.s
+        z = None
         for i in range(1, plan.step_stages):
-            ok = self._stage(i) and ok
-        self.done = plan.step_stages
+            z = self._stage(step, i)
+        step.done = plan.step_stages
         if plan.fsal:  # stage s - 1 sits at the new point: stage s is a copy
-            self.Z[1 + s] = self.Z[s]
-            self._zbuf[s] = self._zbuf[s - 1]
-            self.done = s + 1
-            z1 = self._zbuf[s - 1]
+            Z[1 + s] = Z[s]
+            step.done = s + 1
+            z1 = z
         else:
-            z1 = self._combine(plan.b, h)
-        xi1 = self._xv(z1[: self.nk]).copy()
-        G1 = None
+            z1 = self._sum(step, self._b, base=True)
+        step.xi1 = np.ascontiguousarray(z1[:k].T)
+        step.G1 = None
         if kern is not None:
-            flat1 = z1[self.nk:].copy()
-            ok = ok and self._in_domain(flat1)
-            t1 = kern.load(flat1)
-            G1 = kern.advance(G, t1) if self.mode == "g" else kern.act(t1)
-            self._flat1 = flat1
-        err = None
-        if plan.adaptive:
-            err = self._error(h, xi, xi1, G, G1)
-        return xi1, G1, err, ok
+            t1 = kern.load(step.ctx, z1[k:])
+            self._check_domain(step, t1)
+            step.G1 = kern.advance(step.ctx, G, t1) if self.mode == "g" else kern.act(step.ctx, t1)
+        step.err = self._error(step) if plan.adaptive else None
+        return step
 
-    def _error(self, h, xi, xi1, G, G1):
-        """Scaled sums of squares of the estimates in the state (see :mod:`.control`)."""
+    def _error(self, step: Step) -> tuple[np.ndarray, np.ndarray]:
+        """Scaled sums of squares of the estimates in the state (see :mod:`.control`), one per trajectory."""
+        k, kern = self.k, self.kern
+        B = step.xi.shape[0]
         sums = []
-        sc = control.scale(xi, xi1, self.rtol, self.atol)
-        scG = None if self.kern is None else control.scale(G, G1, self.rtol, self.atol)
-        for w in self.plan.err:
-            e = self._combine(w, h, base=0.0)
-            s = np.sum((self._xv(e[: self.nk]) / sc) ** 2, axis=-1)
-            if self.kern is not None:
-                E = self.kern.matrix(e[self.nk:])  # (B, m, m): the chart estimate, carried to the state
-                eg = np.matmul(G1, E) if self.mode == "g" else np.matmul(E, G1[..., None])[..., 0]
-                s = s + np.sum((eg / scG) ** 2, axis=tuple(range(1, eg.ndim)))
+        sc = control.scale(step.xi, step.xi1, self.rtol, self.atol)
+        scG = None if kern is None else control.scale(step.G, step.G1, self.rtol, self.atol)
+        for terms in self._err:
+            e = self._sum(step, terms, base=False)
+            s = np.sum((np.ascontiguousarray(e[:k].T) / sc) ** 2, axis=-1)
+            if kern is not None:
+                E = kern.matrix(step.ctx, e[k:])  # (B, m, m): the chart estimate, carried to the state
+                eg = np.matmul(step.G1, E) if self.mode == "g" else np.matmul(E, step.G1[:, :, None])[:, :, 0]
+                s = s + np.sum(((eg / scG) ** 2).reshape(B, -1), axis=-1)
             sums.append(s)
-        return sums[0], (sums[1] if len(sums) > 1 else sums[0])
+        return sums[0], sums[-1]
 
-    def complete(self) -> bool:
+    # ------------------------------------------------------------------ the continuous extension
+    def complete(self, step: Step) -> None:
         """Evaluate the stages the continuous extension needs that the trial step did not (after acceptance)."""
-        ok = True
-        for i in range(self.done, self.plan.S):
-            ok = self._stage(i) and ok
-        self.done = self.plan.S
-        return ok
+        for i in range(step.done, self.plan.S):
+            self._stage(step, i)
+        step.done = self.plan.S
 
-    def dense(self, theta, xi: np.ndarray, G, h: float):
-        """The state at ``t + theta h`` inside the last trial step (after :meth:`complete`).
+    def dense(self, step: Step, theta: np.ndarray, rows: np.ndarray):
+        """States inside the step (after :meth:`complete`): trajectory ``rows[i]`` at ``t + theta[i] h``.
 
-        Returns ``(xi (B, k), G like G)`` with ``G = g phi(Theta(theta))`` or ``phi(-Theta(theta)) Gamma``.
+        Parameters
+        ----------
+        step : Step
+        theta : (M,)
+        rows : (M,) int
+            Trajectories of ``step`` (repeats allowed: several times in one step).
+
+        Returns
+        -------
+        xi : (M, k)
+        G : (M, m, m), (M, n) or None
+            ``g phi(Theta(theta))`` or ``phi(-Theta(theta)) Gamma``.
         """
-        z = self._combine(dense_weights(self.plan.dense, float(theta)), h)
-        xi_t = self._xv(z[: self.nk]).copy()
+        W = dense_weights(self.plan.dense, np.asarray(theta, dtype=float))  # (M, S)
+        Z, h = step.Z[:, :, rows], step.h[rows]
+        z = Z[0]
+        for j in self._dense:
+            z = z + (h * W[:, j]) * Z[1 + j]
+        xi_t = np.ascontiguousarray(z[: self.k].T)
         if self.kern is None:
             return xi_t, None
-        t = self.kern.load(z[self.nk:].copy())
-        return xi_t, (self.kern.advance(G, t) if self.mode == "g" else self.kern.act(t))
+        ctx = step.ctx.take(rows)
+        t = self.kern.load(ctx, z[self.k:])
+        return xi_t, (self.kern.advance(ctx, step.G[rows], t) if self.mode == "g" else self.kern.act(ctx, t))
 
-    def accept(self) -> None:
-        """The last trial step was accepted: stage 0 of the next step reuses stage s if it was evaluated."""
+    def new_point_field(self, step: Step) -> np.ndarray | None:
+        """The field at the new point if the step evaluated it (stage s), (B, k); else None (the new-point rule)."""
         s = self.plan.s
-        self._first = self._L[s].copy() if self.done > s else None
+        if step.done <= s:
+            return None
+        return np.ascontiguousarray(step.Z[1 + s, : self.k].T)

@@ -1,15 +1,24 @@
-"""The numpy solver: each trajectory's own time loop (step, controller, output, events) in Python.
+"""The numpy solver: every trajectory of a batch with its own steps, advanced together in vectorised numpy.
 
 The reference the compiled kernel (:mod:`.kernel`) is tested against, and the path for what the kernel
-cannot run (a user potential, a user event function, a group part it does not know). The parts:
+cannot run (a user potential, a user event function, a group part it does not know). Each trajectory
+has its own time, step size, accept/reject, status and failure; the time loop advances all running
+trajectories at once, with their step sizes as a (B,) array and masks for who is running, accepted,
+rejected. The parts:
 
 * the stepper (:class:`.rkmk.RKMKStepper`): trial steps, the extension's extra stages, dense states;
-* the controller and the norm (:mod:`.control`), shared with the kernel;
-* output (:class:`_Output`): t_eval served by the continuous extension, or every step;
-* events (:class:`_Events`): sign changes between accepted steps, roots by Brent's method on the
-  continuous extension.
+* the controller and the norm (:mod:`.control`), shared with the kernel — elementwise, so one call
+  serves the batch;
+* output (:class:`_Output`): t_eval served by the continuous extension (vectorised over every
+  (trajectory, output time) pair of a step), or every step for a single trajectory;
+* events (:class:`_Events`): values at accepted points (vectorised for :class:`~.events.LinearEvent`),
+  sign changes found for the whole batch at once, roots by Brent's method on the continuous extension
+  (per trajectory, in Python, for the few steps with a crossing).
 
-Each trajectory runs alone (one after the other), so its numbers cannot depend on its batch mates.
+A trajectory's numbers do not depend on its batch mates or on B: no computation mixes trajectories
+(see :mod:`.rkmk`), and one trajectory is a batch of one on the same code. When trajectories end, the
+working arrays keep them (their rows take zero steps nobody reads) until a quarter of the rows have
+ended; then the arrays are compressed to the running ones.
 """
 
 from __future__ import annotations
@@ -19,8 +28,8 @@ import math
 import numpy as np
 
 from . import control
-from .problem import RENORM_EVERY, STATUS_FAILED, STATUS_TERMINAL, Problem, RawResult
-from .rkmk import RKMKStepper
+from .problem import RENORM_EVERY, STATUS_FAILED, STATUS_REACHED, STATUS_TERMINAL, Problem, RawResult
+from .rkmk import RKMKStepper, Step
 
 __all__ = ["solve"]
 
@@ -28,277 +37,481 @@ __all__ = ["solve"]
 def solve(problem: Problem, done=None) -> RawResult:
     """Integrate every trajectory of ``problem`` on numpy (see :class:`~.problem.RawResult`).
 
-    ``done(1)``, if given, is called as each trajectory ends (a progress bar's ``update``).
+    ``done(n)``, if given, is called with the number of trajectories that ended at each step of the
+    loop (a progress bar's ``update``).
     """
-    P = problem
-    B, k, q = P.B, P.k, P.q
-    t_out = P.t_eval
-    rec_all = t_out is None
-    M = 0 if rec_all else t_out.size
-    xi_out = np.full((M, B, k), np.nan)
-    G_out = np.full((M, B, q), np.nan)
-    status = np.zeros(B, np.int64)
-    failure = np.zeros(B, np.int64)
-    t_stop = np.full(B, P.t1)
-    counts = np.zeros((3, B), np.int64)
-    ev = [[[] for _ in range(B)] for _ in range(P.n_events)]
-    # the kernel's kind when the problem was built for it (tests compare the two on one Problem), else the default
-    stepper = RKMKStepper(P.model, P.plan, P.chart, P.mode, 1, kind=P.kind, rtol=P.rtol, atol=P.atol)
-    steps_t, steps_xi, steps_G = [], [], []
     with np.errstate(all="ignore"):  # a diverging step is detected (status -1), not warned about
-        for b in range(B):
-            stepper.reset()
-            out = _Output(P, b, xi_out, G_out, steps_t, steps_xi, steps_G, rec_all)
-            events = _Events(P, b, ev)
-            run = _Trajectory(P, b, stepper, out, events)
-            status[b], failure[b], t_stop[b] = run.run()
-            counts[:, b] = (run.nfev, run.steps, run.rejected)
-            if done is not None:
-                done(1)
-    if rec_all:
-        t_out = np.asarray(steps_t, dtype=float)
-        xi_out = np.asarray(steps_xi, dtype=float).reshape(t_out.size, 1, k)
-        G_out = np.asarray(steps_G, dtype=float).reshape(t_out.size, 1, q)
-    raw = RawResult(t=t_out, xi=xi_out, G=G_out, status=status, t_stop=t_stop, failure=failure, nfev=counts[0],
-                    steps=counts[1], rejected=counts[2], backend="numpy")
-    for e in range(P.n_events):
-        rows = [(b, t, x, g) for b in range(B) for (t, x, g) in ev[e][b]]
-        raw.event_index.append(np.array([r[0] for r in rows], dtype=np.int64))
-        raw.event_t.append(np.array([r[1] for r in rows], dtype=float))
-        raw.event_xi.append(np.array([r[2] for r in rows], dtype=float).reshape(len(rows), k))
-        raw.event_G.append(np.array([r[3] for r in rows], dtype=float).reshape(len(rows), q))
-    return raw
+        return _Solve(problem, done).run()
+
+
+def _where(mask: np.ndarray):
+    """``(rows, count)`` where ``mask`` holds: ``slice(None)`` when it holds for every row (selections are then
+    views, not copies), else the indices."""
+    n = int(np.count_nonzero(mask))
+    return (slice(None) if n == mask.size else np.flatnonzero(mask)), n
 
 
 # ---------------------------------------------------------------------------------------------------------
 class _Output:
-    """Where a trajectory's states go: the t_eval rows (by the continuous extension) or every step."""
+    """Where the states go: the t_eval rows (written by trajectory and output index), or every step (B = 1)."""
 
-    def __init__(self, P: Problem, b: int, xi_out, G_out, steps_t, steps_xi, steps_G, rec_all: bool) -> None:
-        self.P, self.b, self.xi_out, self.G_out = P, b, xi_out, G_out
-        self.rec_all = rec_all
-        self.steps_t, self.steps_xi, self.steps_G = steps_t, steps_xi, steps_G
-        self.next = 0  # first t_eval index not yet written
+    def __init__(self, P: Problem) -> None:
+        self.P = P
+        self.rec_all = P.t_eval is None
+        M = 0 if self.rec_all else P.t_eval.size
+        self.xi = np.full((M, P.B, P.k), np.nan)
+        self.G = np.full((M, P.B, P.q), np.nan)
+        # t_eval in increasing order of direction * t, for searchsorted
+        self.key = None if self.rec_all else P.direction * P.t_eval
+        self.steps_t, self.steps_xi, self.steps_G = [], [], []
 
-    def start(self, t0: float, xi, G) -> None:
-        if self.rec_all:
-            self.record(t0, xi, G)
-        elif self.P.t_eval[0] == t0:
-            self.write(0, xi, G)
-            self.next = 1
+    def write(self, i: np.ndarray, traj: np.ndarray, xi: np.ndarray, G: np.ndarray | None) -> None:
+        """Rows ``(i[r], traj[r])`` of the output get ``xi[r]``, ``G[r]`` (flattened)."""
+        self.xi[i, traj] = xi
+        if G is not None:
+            self.G[i, traj] = G.reshape(G.shape[0], -1)
 
-    def record(self, t: float, xi, G) -> None:
+    def record(self, t: float, xi: np.ndarray, G: np.ndarray | None) -> None:
+        """Every step (one trajectory): the state (1, k) and group part after an accepted step."""
         self.steps_t.append(t)
         self.steps_xi.append(np.array(xi, dtype=float).reshape(-1))
         self.steps_G.append(np.zeros(0) if G is None else np.array(G, dtype=float).reshape(-1))
 
-    def write(self, i: int, xi, G) -> None:
-        self.xi_out[i, self.b] = np.reshape(xi, -1)
-        if G is not None:
-            self.G_out[i, self.b] = np.reshape(G, -1)
+    def end(self, t_new: np.ndarray) -> np.ndarray:
+        """For each step end, one past the last t_eval index in the step's interval (t, t_new]."""
+        return np.searchsorted(self.key, self.P.direction * t_new, side="right")
 
-    def pending(self, t: float, t_new: float, direction: float) -> list[int]:
-        """The t_eval indices in (t, t_new] (in the direction of integration)."""
-        if self.rec_all:
-            return []
-        te, out = self.P.t_eval, []
-        i = self.next
-        while i < te.size and direction * (te[i] - t_new) <= 0:
-            out.append(i)
-            i += 1
-        return out
+    def arrays(self):
+        """``(t, xi (M, B, k), G (M, B, q))`` for the :class:`~.problem.RawResult`."""
+        P = self.P
+        if not self.rec_all:
+            return P.t_eval, self.xi, self.G
+        t = np.asarray(self.steps_t, dtype=float)
+        return (t, np.asarray(self.steps_xi, dtype=float).reshape(t.size, 1, P.k),
+                np.asarray(self.steps_G, dtype=float).reshape(t.size, 1, P.q))
 
 
 class _Events:
-    """A trajectory's event functions: values at accepted points, crossings located on the extension."""
+    """The event functions: values at accepted points, crossings, and what was found (in the order found)."""
 
-    def __init__(self, P: Problem, b: int, store) -> None:
-        self.P, self.b, self.store = P, b, store
+    def __init__(self, P: Problem) -> None:
+        self.P = P
         self.E = P.n_events
-        self.old = None
+        self.found = [[] for _ in range(self.E)]  # per event: (trajectory, t, xi (k,), G (q,))
 
-    def values(self, t: float, xi, G) -> np.ndarray:
+    def values(self, t: np.ndarray, xi: np.ndarray, G: np.ndarray | None, traj: np.ndarray,
+               which=None) -> np.ndarray:
+        """Event values (R, E) — or (R, len(which)) — at times ``t`` (R,) and states of trajectories ``traj``.
+
+        A :class:`~.events.LinearEvent` is one stacked dot product per trajectory; a user callable is
+        called for each trajectory with a batch axis of length 1, as it is documented to be.
+        """
         P = self.P
-        vals = np.empty(self.E)
-        for e, fn in enumerate(P.events):
+        R = traj.size
+        which = range(self.E) if which is None else which
+        z = xi if G is None else np.concatenate([xi, G.reshape(R, -1)], axis=1)
+        z = np.ascontiguousarray(z)
+        out = np.empty((R, len(which)))
+        for c, e in enumerate(which):
             lin = P.event_linear[e]
             if lin is not None:
                 coef, off = lin
-                z = np.concatenate([np.reshape(xi, -1), np.reshape(G, -1) if G is not None else np.zeros(0)])
-                vals[e] = float(coef[self.b] @ z - off[self.b])
+                out[:, c] = np.matmul(coef[traj][:, None, :], z[:, :, None])[:, 0, 0] - off[traj]
             else:
-                vals[e] = float(np.reshape(fn(t, *P.user_state(self.b, xi, G)), -1)[0])
-        return vals
+                fn = P.events[e]
+                for r in range(R):
+                    Gr = None if G is None else G[r:r + 1]
+                    out[r, c] = float(np.reshape(fn(float(t[r]), *P.user_state(int(traj[r]), xi[r:r + 1], Gr)), -1)[0])
+        return out
 
-    def crossings(self, old: np.ndarray, new: np.ndarray, at_start: bool) -> list[int]:
-        """Events whose value changed sign (in their direction) over the step (scipy's rule)."""
+    def crossings(self, old: np.ndarray, new: np.ndarray, at_start: np.ndarray) -> np.ndarray:
+        """(R, E) bool: the events whose value changed sign over the step, in their direction (scipy's rule).
+
+        Starting on the surface (a zero at t0) is not a crossing."""
+        d = self.P.event_direction[None, :]
+        moved = old != new
+        up = (old <= 0.0) & (new >= 0.0) & moved
+        down = (old >= 0.0) & (new <= 0.0) & moved
+        out = (up & (d >= 0)) | (down & (d <= 0))
+        return out & ~(at_start[:, None] & (old == 0.0))
+
+    def record(self, e: int, traj: int, t: float, xi: np.ndarray, G: np.ndarray | None) -> None:
+        g = np.zeros(0) if G is None else np.reshape(G, -1).copy()
+        self.found[e].append((traj, t, np.reshape(xi, -1).copy(), g))
+
+    def arrays(self, k: int, q: int):
+        """Per event: ``(index, t, xi, G)`` sorted by trajectory, then time (the order found within one)."""
         out = []
-        for e in range(self.E):
-            g0, g1 = old[e], new[e]
-            if at_start and g0 == 0.0:  # starting on the surface is not a crossing
-                continue
-            up = g0 <= 0.0 <= g1 and g0 != g1
-            down = g0 >= 0.0 >= g1 and g0 != g1
-            d = self.P.event_direction[e]
-            if (up and d >= 0) or (down and d <= 0):
-                out.append(e)
+        for rows in self.found:
+            order = sorted(range(len(rows)), key=lambda r: rows[r][0])  # stable: time order within a trajectory
+            rows = [rows[r] for r in order]
+            out.append((np.array([r[0] for r in rows], dtype=np.int64), np.array([r[1] for r in rows], dtype=float),
+                        np.array([r[2] for r in rows], dtype=float).reshape(len(rows), k),
+                        np.array([r[3] for r in rows], dtype=float).reshape(len(rows), q)))
         return out
 
 
-class _Trajectory:
-    """One trajectory's time loop: controller, failure rules, output, events, re-projection."""
+class _Solve:
+    """The time loop over the working set: the trajectories still running (and some that ended, until
+    the set is compressed), each row with its own time, step size, counters and cached field value.
 
-    def __init__(self, P: Problem, b: int, stepper: RKMKStepper, out: _Output, events: _Events) -> None:
-        self.P, self.b, self.st, self.out, self.ev = P, b, stepper, out, events
-        self.nfev = self.steps = self.rejected = 0
-        self.xi, self.G, self.gamma = P.initial_state(b)
+    Row arrays (A rows): ``idx`` (the trajectory), ``t``, ``h_abs``, ``after_reject``, ``steps``,
+    ``rejected``, ``nfev``, ``xi`` (A, k), ``G`` (A, m, m) / (A, n) / None, ``gamma`` (A, n) / None,
+    ``first`` (A, k) and ``have_first`` (the field at the current point, reused as the next stage 0),
+    ``ev_old`` (A, E), ``at_start``, ``next_out`` (first t_eval index not yet written), ``live``.
+    """
+
+    _ROWS = ("idx", "t", "h_abs", "after_reject", "steps", "rejected", "nfev", "xi", "G", "gamma", "first",
+             "have_first", "ev_old", "at_start", "next_out", "live")
+
+    def __init__(self, P: Problem, done) -> None:
+        self.P, self.done_cb = P, done
+        B = P.B
+        # the kernel's kind when the problem was built for it (tests compare the two on one Problem), else the default
+        self.st = RKMKStepper(P.model, P.plan, P.chart, P.mode, kind=P.kind, rtol=P.rtol, atol=P.atol)
+        self.out = _Output(P)
+        self.ev = _Events(P)
+        self.status = np.zeros(B, np.int64)
+        self.failure = np.zeros(B, np.int64)
+        self.t_stop = np.full(B, P.t1)
+        self.counts = np.zeros((3, B), np.int64)  # nfev, steps, rejected
         self.renorm = max(RENORM_EVERY, P.m)
+        self.ncomp = P.k + P.q
+        self.n_fixed = 0
+        self.tries = 0  # trial steps so far: no trajectory has made more (it makes at most one per loop)
+        # 10 ulps of the largest |t| of the span: a step above it is above 10 ulps of any t (the underflow test)
+        self.h_floor = 10 * abs(math.nextafter(max(abs(P.t0), abs(P.t1)), math.inf) - max(abs(P.t0), abs(P.t1)))
+        # the rows
+        self.idx = np.arange(B)
+        self.t = np.full(B, P.t0)
+        self.h_abs = np.zeros(B)
+        self.after_reject = np.zeros(B, dtype=bool)
+        self.steps = np.zeros(B, np.int64)
+        self.rejected = np.zeros(B, np.int64)
+        self.nfev = np.zeros(B, np.int64)
+        self.xi = P.xi0.copy()
+        self.G = {"g": lambda: P.G0.reshape(B, P.m, P.m).copy(), "gamma": lambda: P.G0.copy(),
+                  "none": lambda: None}[P.mode]()
+        self.gamma = P.gamma if P.gamma.shape[-1] else None
+        self.first = np.zeros((B, P.k))
+        self.have_first = np.zeros(B, dtype=bool)
+        self.ev_old = np.zeros((B, self.ev.E))
+        self.at_start = np.ones(B, dtype=bool)
+        self.next_out = np.zeros(B, np.int64)
+        self.live = np.ones(B, dtype=bool)
 
-    def _flatG(self, G):
-        return None if G is None else np.reshape(G, -1)
+    # ------------------------------------------------------------------ bookkeeping
+    def _end(self, rows: np.ndarray, status: int, failure: int, t) -> None:
+        """Trajectories at ``rows`` (working-set indices) end with ``status``, ``failure`` at time(s) ``t``."""
+        if rows.size == 0:
+            return
+        b = self.idx[rows]
+        self.status[b], self.failure[b], self.t_stop[b] = status, failure, t
+        self.counts[:, b] = (self.nfev[rows], self.steps[rows], self.rejected[rows])
+        self.live[rows] = False
+        if self.done_cb is not None:
+            self.done_cb(int(rows.size))
 
-    def run(self) -> tuple[int, int, float]:
-        st = self.st
-        nfev0 = st.nfev
-        try:
-            return self._run()
-        finally:
-            self.nfev = st.nfev - nfev0
+    def _fail(self, mask: np.ndarray, code: int, t: np.ndarray) -> None:
+        rows = np.flatnonzero(mask)
+        self._end(rows, STATUS_FAILED, code, t[rows])
 
-    def _fail(self, code: int, t: float) -> tuple[int, int, float]:
-        return STATUS_FAILED, code, t
+    def _compress(self) -> None:
+        """Drop the rows that ended once they are a quarter of the working set (their zero steps cost work)."""
+        A = self.live.size
+        dead = A - int(np.count_nonzero(self.live))
+        if dead == 0 or 4 * dead < A:
+            return
+        keep = np.flatnonzero(self.live)
+        for name in self._ROWS:
+            a = getattr(self, name)
+            if a is not None:
+                setattr(self, name, a[keep])
 
-    def _run(self) -> tuple[int, int, float]:
+    # ------------------------------------------------------------------ the loop
+    def run(self) -> RawResult:
+        self._start()
+        while True:
+            self._compress()
+            if self.live.size == 0:
+                break
+            self._iterate()
+        P = self.P
+        t_out, xi_out, G_out = self.out.arrays()
+        raw = RawResult(t=t_out, xi=xi_out, G=G_out, status=self.status, t_stop=self.t_stop, failure=self.failure,
+                        nfev=self.counts[0], steps=self.counts[1], rejected=self.counts[2], backend="numpy")
+        for index, t, x, g in self.ev.arrays(P.k, P.q):
+            raw.event_index.append(index)
+            raw.event_t.append(t)
+            raw.event_xi.append(x)
+            raw.event_G.append(g)
+        return raw
+
+    def _start(self) -> None:
+        """The field at t0 (a non-finite one fails at once), the output at t0, event values, the first step."""
         P, st = self.P, self.st
-        t, t1, direction = P.t0, P.t1, P.direction
-        f0 = st.field(self.xi, self.G, self.gamma)
-        if not np.all(np.isfinite(f0)) or not np.all(np.isfinite(self.xi)):
-            return self._fail(1, t)
-        self.out.start(t, self.xi, self._flatG(self.G))
-        ev_old = self.ev.values(t, self.xi, self._flatG(self.G)) if self.ev.E else None
-        at_start = True
-        if P.adaptive:
-            h_abs = P.h if P.h > 0 else self._initial_step()
-        else:
-            h_abs = P.h
-        after_reject = False
-        # fixed step: the grid t0 + i h (no accumulated sums), the last step shortened to land on t1
-        n_fixed = 0 if P.adaptive else max(1, math.ceil(abs(t1 - t) / h_abs - 1e-9))
-        while direction * (t1 - t) > 0:
-            if self.steps + self.rejected >= P.max_steps:
-                return self._fail(3, t)
-            if P.adaptive:
-                if h_abs < 10 * abs(math.nextafter(t, direction * math.inf) - t):
-                    return self._fail(2, t)
-                hit = h_abs >= abs(t1 - t)
-                h = (t1 - t) if hit else direction * h_abs
-            else:
-                hit = self.steps + 1 >= n_fixed
-                h = (t1 if hit else P.t0 + direction * h_abs * (self.steps + 1)) - t
-            xi1, G1, err, ok = st.trial(h, self.xi, self.G, self.gamma)
-            if P.adaptive:
-                norm = float(control.combine(err[0], err[1], P.k + P.q, P.plan.two_estimators)[0]) if ok else math.inf
-                if not norm <= 1.0:
-                    self.rejected += 1
-                    h_abs = abs(h) * float(control.reject_factor(norm, P.plan.error_exponent))
-                    after_reject = True
-                    continue
-            finite = bool(np.all(np.isfinite(xi1)) and (G1 is None or np.all(np.isfinite(G1))))
-            if not finite:  # also a NaN chart argument: the field, not the chart, broke down
-                return self._fail(1, t + h)
-            if not ok:
-                return self._fail(4, t)
-            t_new = t1 if hit else t + h
-            # the step is accepted: its interior, if asked for, comes from the continuous extension
-            idx = self.out.pending(t, t_new, direction)
-            ev_new = self.ev.values(t_new, xi1, self._flatG(G1)) if self.ev.E else None
-            crossed = self.ev.crossings(ev_old, ev_new, at_start) if self.ev.E else []
-            if idx or crossed:
-                st.complete()
-            stop_t = None
-            if crossed:
-                self._x1, self._G1 = xi1, G1
-                stop_t = self._locate(crossed, t, h, t_new, ev_old, ev_new)
-            for i in idx:
-                te = P.t_eval[i]
-                if stop_t is not None and direction * (te - stop_t) > 0:
-                    break
-                if te == t_new:
-                    self.out.write(i, xi1, self._flatG(G1))
-                else:
-                    x, g = st.dense((te - t) / h, self.xi, self.G, h)
-                    self.out.write(i, x, self._flatG(g))
-                self.out.next = i + 1
-            st.accept()
-            self.steps += 1
-            if stop_t is not None:
-                return STATUS_TERMINAL, 0, stop_t
-            if P.reproject and G1 is not None and self.steps % self.renorm == 0:
-                G1 = P.reprojected(G1)
-                st.reset()
-            self.xi, self.G, t = xi1, G1, t_new
-            if self.out.rec_all:
-                self.out.record(t, self.xi, self._flatG(self.G))
-            ev_old, at_start = ev_new, False
-            if P.adaptive:
-                h_new = abs(h) * float(control.accept_factor(norm, P.plan.error_exponent, after_reject))
-                h_abs = max(h_abs, h_new) if hit else h_new
-                after_reject = False
-        return 0, 0, t1
+        self.first = st.field(self.xi, self.G, self.gamma)
+        self.have_first[:] = True
+        self.nfev += 1
+        finite = np.all(np.isfinite(self.first), axis=1) & np.all(np.isfinite(self.xi), axis=1)
+        self._fail(~finite, 1, self.t)
+        live = np.flatnonzero(self.live)
+        if self.out.rec_all:
+            if live.size:
+                self.out.record(P.t0, self.xi, self.G)
+        elif P.t_eval[0] == P.t0:
+            self.out.write(np.zeros(live.size, np.int64), self.idx[live], self.xi[live],
+                           None if self.G is None else self.G[live])
+            self.next_out[:] = 1
+        if self.ev.E:
+            self.ev_old[live] = self.ev.values(self.t[live], self.xi[live], self._rows(self.G, live), self.idx[live])
+        if not P.adaptive:
+            self.h_abs[:] = P.h
+            # fixed step: the grid t0 + i h (no accumulated sums), the last step shortened to land on t1
+            self.n_fixed = max(1, math.ceil(abs(P.t1 - P.t0) / P.h - 1e-9))
+        elif P.h > 0:
+            self.h_abs[:] = P.h
+        elif live.size:
+            self.h_abs[live] = self._initial_step(live)
 
-    def _initial_step(self) -> float:
-        """Hairer's starting step on the embedded state y = (xi, G), as scipy's (one more evaluation)."""
+    @staticmethod
+    def _rows(a, rows):
+        return None if a is None else a[rows]
+
+    def _initial_step(self, rows: np.ndarray) -> np.ndarray:
+        """Hairer's starting step on the embedded state y = (xi, G), as scipy's (one more evaluation each)."""
         P, st = self.P, self.st
-        G = self.G
-        y0 = np.concatenate([self.xi.reshape(-1), np.zeros(0) if G is None else G.reshape(-1)])
-        f0 = np.concatenate([st.field(self.xi, G, self.gamma).reshape(-1), P.group_velocity(self.xi, G)])
+        R = rows.size
+        xi, G, gamma, f0 = self.xi[rows], self._rows(self.G, rows), self._rows(self.gamma, rows), self.first[rows]
+
+        def flat(x, g):  # (R, k + q), C-contiguous: the means below run along each trajectory's own numbers
+            return np.ascontiguousarray(x if g is None else np.concatenate([x, g.reshape(R, -1)], axis=1))
+
+        y0 = flat(xi, G)
+        F0 = flat(f0, self._group_velocity(xi, G))
         sc = control.scale(y0, y0, P.rtol, P.atol)
-        d0 = math.sqrt(np.mean((y0 / sc) ** 2))
-        d1 = math.sqrt(np.mean((f0 / sc) ** 2))
-        h0 = float(control.probe_step(d0, d1))
-        y1 = y0 + P.direction * h0 * f0
-        xi1 = y1[: P.k].reshape(1, -1)
-        G1 = None if G is None else y1[P.k:].reshape(G.shape)
-        L1 = P.model.xi_dot(xi1, st.vertical(G1, self.gamma))
-        st.nfev += 1
-        f1 = np.concatenate([np.reshape(L1, -1), P.group_velocity(xi1, G1)])
-        d2 = math.sqrt(np.mean(((f1 - f0) / sc) ** 2)) / h0
-        return float(control.initial_step(d0, d1, d2, h0, P.plan.order))
+        d0 = np.sqrt(np.mean((y0 / sc) ** 2, axis=1))
+        d1 = np.sqrt(np.mean((F0 / sc) ** 2, axis=1))
+        h0 = control.probe_step(d0, d1)
+        y1 = y0 + (P.direction * h0)[:, None] * F0
+        xi1 = np.ascontiguousarray(y1[:, : P.k])
+        G1 = None if G is None else np.ascontiguousarray(y1[:, P.k:]).reshape(G.shape)
+        F1 = flat(st.field(xi1, G1, gamma), self._group_velocity(xi1, G1))
+        self.nfev[rows] += 1
+        d2 = np.sqrt(np.mean(((F1 - F0) / sc) ** 2, axis=1)) / h0
+        return control.initial_step(d0, d1, d2, h0, P.plan.order)
 
-    def _locate(self, crossed, t, h, t_new, ev_old, ev_new) -> float | None:
-        """Locate each crossing on the extension, record them in time order; the first terminal time or None."""
+    def _group_velocity(self, xi: np.ndarray, G: np.ndarray | None) -> np.ndarray | None:
+        """d/dt of the group part: ``g Omega`` (attitude) or ``-Omega Gamma`` (vertical), one product per trajectory."""
+        if G is None:
+            return None
+        Om = self.P.model.omega_matrix(np.ascontiguousarray(xi)[:, None, :])[:, 0]  # (R, m, m)
+        if self.P.mode == "g":
+            return np.matmul(G, Om)
+        return -np.matmul(Om, G[:, :, None])[:, :, 0]
+
+    def _iterate(self) -> None:
+        """One trial step of every running trajectory; the accepted ones advance."""
+        P, st, plan = self.P, self.st, self.P.plan
+        direction, t1, t = P.direction, P.t1, self.t
+        live = self.live
+        if self.tries >= P.max_steps:  # (no trajectory can have reached max_steps before)
+            self._fail(live & (self.steps + self.rejected >= P.max_steps), 3, t)
+        self.tries += 1
+        if P.adaptive and self.h_abs.min() < self.h_floor:  # below ten ulps of t the step no longer moves t
+            self._fail(live & (self.h_abs < 10 * np.abs(np.nextafter(t, direction * np.inf) - t)), 2, t)
+        n_live = int(np.count_nonzero(live))
+        if n_live == 0:
+            return
+        everyone = n_live == live.size  # then selections are slices (views), not index arrays (copies)
+        if P.adaptive:
+            hit = self.h_abs >= np.abs(t1 - t)
+            h = np.where(hit, t1 - t, direction * self.h_abs)
+        else:
+            hit = self.steps + 1 >= self.n_fixed
+            h = np.where(hit, t1, P.t0 + direction * self.h_abs * (self.steps + 1)) - t
+        if not everyone:
+            h = np.where(live, h, 0.0)  # the rows that ended take a zero step, never read
+        # stage 0: the field at the current point, unless the last step left it (the plan's new-point rule)
+        need = ~self.have_first if everyone else live & ~self.have_first
+        sel, n = _where(need)
+        if n:
+            self.first[sel] = st.field(self.xi[sel], self._rows(self.G, sel), self._rows(self.gamma, sel))
+            self.have_first[sel] = True
+            self.nfev[sel] += 1
+        step = st.trial(h, self.xi, self.G, self.gamma, self.first)
+        self.nfev[_where(live)[0] if not everyone else slice(None)] += plan.step_stages - 1
+        norm = None
+        if P.adaptive:
+            s5, s3 = step.err
+            norm = np.where(step.ok, control.combine(s5, s3, self.ncomp, plan.two_estimators), np.inf)
+            accepted = norm <= 1.0  # a NaN norm never is
+            if not everyone:
+                accepted &= live
+            rej = live & ~accepted
+            if rej.any():
+                self.rejected[rej] += 1
+                self.h_abs = np.where(rej, np.abs(h) * control.reject_factor(norm, plan.error_exponent), self.h_abs)
+                self.after_reject |= rej
+        else:
+            accepted = live
+        G1 = step.G1
+        if np.isfinite(step.xi1).all() and (G1 is None or np.isfinite(G1).all()):  # one test for the batch
+            finite = np.ones(live.size, dtype=bool)
+        else:  # which trajectories
+            finite = np.all(np.isfinite(step.xi1), axis=1)
+            if G1 is not None:
+                finite &= np.all(np.isfinite(G1.reshape(G1.shape[0], -1)), axis=1)
+        good = accepted & finite & step.ok
+        sel, n = _where(good)
+        if n < np.count_nonzero(accepted):
+            # also a NaN chart argument: the field, not the chart, broke down
+            self._fail(accepted & ~finite, 1, t + h)
+            self._fail(accepted & finite & ~step.ok, 4, t)  # fixed steps (an adaptive one is rejected)
+        if n:
+            self._accept(sel, n, step, h[sel], hit[sel], None if norm is None else norm[sel])
+
+    def _accept(self, sel, R: int, step: Step, h: np.ndarray, hit: np.ndarray, norm) -> None:
+        """The accepted steps of the rows ``sel`` (a slice or indices, R rows): output inside them, events,
+        the next step's size and stage 0."""
+        P, st, out, ev = self.P, self.st, self.out, self.ev
+        direction, plan = P.direction, P.plan
+        t = self.t[sel]
+        t_new = np.where(hit, P.t1, t + h)
+        xi1 = step.xi1[sel]
+        G1 = None if step.G1 is None else step.G1[sel]
+        # the output times inside (t, t_new] and the events crossed: both need the continuous extension
+        n_out = None
+        if not out.rec_all:
+            end = out.end(t_new)
+            n_out = end - self.next_out[sel]
+        need = None if n_out is None else n_out > 0
+        if ev.E:
+            ev_new = ev.values(t_new, xi1, G1, self.idx[sel])
+            crossed = ev.crossings(self.ev_old[sel], ev_new, self.at_start[sel])
+            hits = crossed.any(axis=1)
+            need = hits if need is None else need | hits
+        rows = np.arange(self.live.size)[sel] if (need is not None and need.any()) or ev.E else None
+        sub, pos = None, None  # working-set index of each accepted row (where needed); the extension
+        if need is not None and need.any():
+            ext = np.flatnonzero(need)  # positions among the accepted rows
+            sub = step.take(rows[ext])
+            st.complete(sub)
+            self.nfev[rows[ext]] += plan.S - step.done
+            pos = np.full(R, -1, np.int64)  # position of each accepted row in sub
+            pos[ext] = np.arange(ext.size)
+        # events: roots on the extension, per trajectory (few steps have a crossing)
+        stop_t = None
+        if ev.E and hits.any():
+            stop_t = np.full(R, np.nan)
+            ev_old = self.ev_old[sel]
+            for r in np.flatnonzero(hits):
+                stop_t[r] = self._locate(sub, pos[r], int(self.idx[rows[r]]), np.flatnonzero(crossed[r]), t[r], h[r],
+                                         t_new[r], ev_old[r], ev_new[r], xi1[r:r + 1],
+                                         None if G1 is None else G1[r:r + 1])
+        # output: every (trajectory, t_eval index) pair of these steps at once
+        if sub is not None and n_out is not None and n_out.any():
+            self._write(rows, n_out, t, h, t_new, xi1, G1, sub, pos, stop_t)
+        if n_out is not None:
+            self.next_out[sel] = end
+        # the next step's stage 0: the field at the new point if this step evaluated it
+        L = st.new_point_field(step)
+        if L is not None:
+            self.first[sel] = L[sel]
+        self.have_first[sel] = L is not None
+        if sub is not None:
+            self.first[rows[ext]] = st.new_point_field(sub)
+            self.have_first[rows[ext]] = True
+        self.steps[sel] += 1
+        if stop_t is not None:  # terminal events end their trajectories there; the others go on
+            stopped = ~np.isnan(stop_t)
+            self._end(rows[stopped], STATUS_TERMINAL, 0, stop_t[stopped])
+            go = ~stopped
+            sel, rows, R = rows[go], rows[go], int(np.count_nonzero(go))
+            t_new, xi1, h, hit, ev_new = t_new[go], xi1[go], h[go], hit[go], ev_new[go]
+            G1 = None if G1 is None else G1[go]
+            norm = None if norm is None else norm[go]
+        if P.reproject and G1 is not None:
+            rp = self.steps[sel] % self.renorm == 0
+            if rp.any():
+                G1 = G1.copy()
+                G1[rp] = P.reprojected(G1[rp])
+                self.have_first[np.arange(self.live.size)[sel][rp]] = False
+        self.xi[sel] = xi1
+        if G1 is not None:
+            self.G[sel] = G1
+        self.t[sel] = t_new
+        if out.rec_all and R:
+            out.record(float(t_new[0]), xi1, G1)
+        if ev.E:
+            self.ev_old[sel] = ev_new
+            self.at_start[sel] = False
+        if P.adaptive:
+            h_new = np.abs(h) * control.accept_factor(norm, plan.error_exponent, self.after_reject[sel])
+            self.h_abs[sel] = np.where(hit, np.maximum(self.h_abs[sel], h_new), h_new)
+            self.after_reject[sel] = False
+        reached = direction * (P.t1 - t_new) <= 0
+        if reached.any():
+            self._end(np.arange(self.live.size)[sel][reached], STATUS_REACHED, 0, P.t1)
+
+    def _write(self, rows, n_out, t, h, t_new, xi1, G1, sub: Step, pos, stop_t) -> None:
+        """Output at the t_eval indices of the accepted steps: the step's end where it is an output time,
+        the continuous extension inside — every (trajectory, index) pair at once."""
+        P, out = self.P, self.out
+        rr = np.repeat(np.arange(n_out.size), n_out)  # accepted row of each pair
+        i = self.next_out[rows][rr] + (np.arange(rr.size) - np.repeat(np.cumsum(n_out) - n_out, n_out))
+        te = P.t_eval[i]
+        if stop_t is not None:  # not past a terminal event
+            keep = ~(P.direction * (te - stop_t[rr]) > 0)
+            rr, i, te = rr[keep], i[keep], te[keep]
+        traj = self.idx[rows]
+        at_end = te == t_new[rr]
+        if at_end.any():
+            a = rr[at_end]
+            out.write(i[at_end], traj[a], xi1[a], None if G1 is None else G1[a])
+        inner = ~at_end
+        if inner.any():
+            a = rr[inner]
+            x, g = self.st.dense(sub, (te[inner] - t[a]) / h[a], pos[a])
+            out.write(i[inner], traj[a], x, g)
+
+    def _locate(self, sub: Step, j: int, b: int, crossed: np.ndarray, t: float, h: float, t_new: float,
+                ev_old: np.ndarray, ev_new: np.ndarray, x1: np.ndarray, G1) -> float:
+        """Locate each crossing of trajectory b on the extension (row ``j`` of ``sub``), record them in
+        time order; the first terminal time, or NaN."""
         from scipy.optimize import brentq  # loaded when an event is first located
 
-        P, st = self.P, self.st
+        P, st, ev = self.P, self.st, self.ev
+        row = np.array([j])
         found = []
         for e in crossed:
             def value(theta, e=e):
                 if theta == 1.0:
                     return ev_new[e]
-                x, g = st.dense(theta, self.xi, self.G, h)
-                return self.ev.values(t + theta * h, x, self._flatG(g))[e]
+                x, g = st.dense(sub, np.array([theta]), row)
+                return ev.values(np.array([t + theta * h]), x, g, np.array([b]), which=[e])[0, 0]
 
-            lo_val = ev_old[e]
-            if lo_val == 0.0:
+            if ev_old[e] == 0.0:
                 theta = 0.0
             elif ev_new[e] == 0.0:
                 theta = 1.0
             else:
                 xtol = 4.0 * abs(math.nextafter(t_new, math.inf) - t_new) / abs(h)
                 theta = brentq(value, 0.0, 1.0, xtol=max(xtol, 1e-300), rtol=4 * np.finfo(float).eps, maxiter=200)
-            found.append((theta, e))
+            found.append((theta, int(e)))
         found.sort()
         stop = None
         for theta, e in found:
             if stop is not None and theta > stop:
                 break
             if theta == 1.0:
-                tc, x, g = t_new, self._x1, self._G1
+                tc, x, g = t_new, x1, G1
             else:
                 tc = t + theta * h
-                x, g = st.dense(theta, self.xi, self.G, h)
-            self.ev.store[e][self.b].append((tc, np.reshape(x, -1).copy(),
-                                             np.zeros(0) if g is None else np.reshape(g, -1).copy()))
+                x, g = st.dense(sub, np.array([theta]), row)
+            ev.record(e, b, tc, x, g)
             if P.event_terminal[e]:
                 stop = theta
-        return None if stop is None else (t_new if stop == 1.0 else t + stop * h)
+        if stop is None:
+            return math.nan
+        return t_new if stop == 1.0 else t + stop * h
