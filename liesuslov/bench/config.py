@@ -148,7 +148,7 @@ class BenchConfig:
     @classmethod
     def quick(cls, **overrides) -> BenchConfig:
         """rkmk4, rkmk45, rkmk853 × exp/cayley and the three scipy methods at 3 settings; no long run, short
-        floor comparisons, batches of at most 100 (the numpy path steps each trajectory in Python), no cold
+        floor comparisons, batches of at most 100 (the minute's budget on the numpy path), no cold
         compilation.
 
         Runs the numpy path (``backend="numpy"`` where ``integrate`` has the option): the one-off

@@ -13,8 +13,9 @@ Stages are numbered::
 
 A stage's argument is ``Xi_i = xi + h sum_j A[i, j] L_j``, ``Theta_i = h sum_j A[i, j] K_j`` (L the field, K the
 chart velocity): the compiled kernel stores ``h L_j``, ``h K_j`` and sums term by term; the numpy stepper
-multiplies the rows ``(1, h A[i, :i])`` into its stage buffer — the same method, agreeing to rounding. Both
-take one trajectory at a time, so a trajectory's numbers do not depend on its batch mates.
+adds ``(A[i, j] h) L_j`` row by row, elementwise over the batch, each trajectory with its own h — the same method,
+agreeing to rounding. Neither reduces across trajectories, so a trajectory's numbers do not depend on its
+batch mates.
 
 Continuous extension: ``xi(t + theta h) = xi + sum_j b_j(theta) (h L_j)`` and ``Theta(theta) = sum_j
 b_j(theta) (h K_j)`` with ``b(theta) = dense @ [theta, …, theta^p]``; then ``g = g0 phi(Theta(theta))`` and

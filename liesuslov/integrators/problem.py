@@ -120,18 +120,6 @@ class Problem:
         return 1.0 if self.t1 > self.t0 else -1.0
 
     # --------------------------------------------------------------- the group part (what the loops need of it)
-    def initial_state(self, b: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-        """``(xi (1, k), G, gamma (1, n) or None)`` of trajectory b as the numpy stepper takes them
-        (G: (1, m, m) attitude, (1, n) vertical, or None)."""
-        xi = self.xi0[b][None, :].copy()
-        G = None
-        if self.mode == "g":
-            G = self.G0[b].reshape(1, self.m, self.m).copy()
-        elif self.mode == "gamma":
-            G = self.G0[b][None, :].copy()
-        gamma = self.gamma[b][None, :] if self.gamma.shape[-1] else None
-        return xi, G, gamma
-
     def reprojected(self, G: np.ndarray | None) -> np.ndarray | None:
         """One Newton–Schulz step toward SO(n) for an attitude, ``Gamma / |Gamma|`` for a vertical."""
         if G is None:
@@ -141,15 +129,6 @@ class Problem:
 
             return orthonormalize(G) if self.skew else G
         return G / np.linalg.norm(G, axis=-1, keepdims=True)
-
-    def group_velocity(self, xi: np.ndarray, G: np.ndarray | None) -> np.ndarray:
-        """d/dt of the group part, flat: ``g Omega`` (attitude) or ``-Omega Gamma`` (vertical); empty without one."""
-        if G is None:
-            return np.zeros(0)
-        Om = self.model.omega_matrix(xi)
-        if self.mode == "g":
-            return np.matmul(G, Om).reshape(-1)
-        return -np.matmul(Om, G[..., None]).reshape(-1)
 
     def user_state(self, b: int, xi: np.ndarray, G: np.ndarray | None):
         """``(Omega, Gamma, g)`` of trajectory b as an event callable sees them (batch axis of length 1):
