@@ -4,10 +4,12 @@ Per trajectory, inside one compiled loop (no Python per step, no allocation per 
 the method's :class:`~.plan.StagePlan`, the step-size controller and the error norm of :mod:`.control`
 (those very functions, compiled by numba), the continuous extension for ``t_eval`` and events, event
 location by a bracketing root finder (Illinois), re-projection, failures with their time and code; the loop
-(:func:`.loop._solve_one`) calls one function per job — stages, the step's end and error, the first step,
-event location, output, re-projection. A batch runs in contiguous chunks on threads (the loop releases the
-GIL; no parfor); a trajectory's numbers do not depend on its batch mates or the chunking (no reduction
-across trajectories, the same code path for B = 1 and B > 1).
+(:func:`.loop._solve_one`) runs the stages and the step's end inline (a call per step would pass ~30
+arrays, each reference-counted on the way in and out) and calls one function per rarer job — the first
+step, the error norm, event location, output, re-projection. The group code is inlined into it by family
+(:mod:`.group`). A batch runs in contiguous chunks on threads (the loop releases the GIL; no parfor); a
+trajectory's numbers do not depend on its batch mates or the chunking (no reduction across trajectories,
+the same code path for B = 1 and B > 1).
 
 Specialisations: one loop per *family* of kinds (:data:`~.common.FAMILIES`), the family a numba literal —
 the closed forms (so3, so4, and no group part) and the matrix algorithms (dense, lowrank) — so a scene
@@ -19,10 +21,11 @@ liesuslov.integrators.kernel.warm``; the test session does it first).
 Cost (2-core machine shared with other work, 2026-11-24): the first compiled call on an empty cache
 compiles its family: ~30–40 s for the closed forms, ~60–90 s for the matrix family (one loop for every
 kind was ~65 s); later processes load it from the cache (~1 s). RKMK4 with reconstruction, h = 0.005,
-best of 20 runs (thread CPU time): so(3) ~0.8 µs per step (~6x a plain loop hard-coded for that method:
-the kernel's loops run over run-time sizes — k, stages, layouts — that the plain loop has as constants);
-so(4) ~1.4 µs per step (so4 kind, the Klebsh–Tisserand scene of the benchmark; the dense kind ~4.3 µs,
-the plain loop ~0.3 µs); Fedorov–Kozlov SO(256) (low-rank kind) ~0.55 ms per step.
+best of 20 runs (thread CPU time): so(3) ~1.0 µs per step (~7x a plain loop hard-coded for that method:
+the kernel's loops run over run-time sizes — k, stages, layouts — that the plain loop has as constants;
+the loop of one specialisation for every kind did ~0.8 µs); so(4) ~1.35 µs per step (so4 kind, the
+Klebsh–Tisserand scene of the benchmark; the dense kind ~4.3 µs, the plain loop ~0.3 µs);
+Fedorov–Kozlov SO(256) (low-rank kind) ~0.55 ms per step.
 
 What is compiled
 ----------------

@@ -75,25 +75,68 @@ def _alg_state(family, kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
     gamma, n entries) — the error estimate of the group part, and (with Ea = Omega) its velocity."""
 
 
-def _by_family(first_kind: int, first, other):
-    """Compiled calls ``stub(family, kind, ...)`` with a literal family run ``first`` when ``kind ==
-    first_kind`` and ``other`` otherwise (a run-time branch between the family's two kinds)."""
-
-    def impl(family, kind, *args):
+# A family's implementation of each operation: ``first`` when ``kind == first_kind``, ``other`` otherwise (a
+# run-time branch between the family's two kinds). Written out per operation, not with *args: a tuple of
+# arrays would be packed (and reference-counted) on every call.
+def _omega_by(first_kind, first, other):
+    def impl(family, kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
         if kind == first_kind:
-            return first(kind, *args)
-        return other(kind, *args)
-
+            return first(kind, skew, x, widx, wval, Om, Q, nc, cvec, out)
+        return other(kind, skew, x, widx, wval, Om, Q, nc, cvec, out)
     return impl
 
 
-def _by_kind(stub, table: dict) -> None:
-    """Register ``stub``'s implementations: ``table[family] = (first_kind, first, other)``."""
+def _sq_by(first_kind, first, other):
+    def impl(family, kind, Th):
+        if kind == first_kind:
+            return first(kind, Th)
+        return other(kind, Th)
+    return impl
 
-    @overload(stub, prefer_literal=True, strict=False, jit_options=_JIT_OPTIONS)
-    def _typer(family, kind, *args):
+
+def _dinv_by(first_kind, first, other):
+    def impl(family, kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+        if kind == first_kind:
+            first(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs)
+        else:
+            other(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs)
+    return impl
+
+
+def _act_by(first_kind, first, other):
+    def impl(family, kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
+        if kind == first_kind:
+            first(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs)
+        else:
+            other(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs)
+    return impl
+
+
+def _update_by(first_kind, first, other):
+    def impl(family, kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+        if kind == first_kind:
+            first(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2)
+        else:
+            other(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2)
+    return impl
+
+
+def _state_by(first_kind, first, other):
+    def impl(family, kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+        if kind == first_kind:
+            first(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2)
+        else:
+            other(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2)
+    return impl
+
+
+def _by_kind(stub, by, table: dict) -> None:
+    """Register ``stub``'s implementations: with a literal family f, ``by(*table[f])``."""
+
+    @overload(stub, prefer_literal=True, strict=False, inline="always", jit_options=_JIT_OPTIONS)
+    def _typer(family, *args):
         if isinstance(family, types.IntegerLiteral) and family.literal_value in table:
-            return _by_family(*table[family.literal_value])
+            return by(*table[family.literal_value])
         return None
 
 
@@ -443,9 +486,9 @@ def _lowrank_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
 
 # ============================================================================ the tables (codes: common.KINDS)
 # family 1 (closed forms): so3, so4 (and mode "none", which calls none of these); family 2 (matrices): dense, lowrank
-_by_kind(_omega_alg, {1: (1, _so3_omega, _so4_omega), 2: (2, _dense_omega, _lowrank_omega)})
-_by_kind(_alg_sq, {1: (1, _so3_sq, _so4_sq), 2: (2, _matrix_sq, _matrix_sq)})
-_by_kind(_alg_dinv, {1: (1, _so3_dinv, _so4_dinv), 2: (2, _dense_dinv, _lowrank_dinv)})
-_by_kind(_alg_act, {1: (1, _so3_act, _so4_act), 2: (2, _dense_act, _lowrank_act)})
-_by_kind(_alg_update, {1: (1, _so3_update, _so4_update), 2: (2, _dense_update, _lowrank_update)})
-_by_kind(_alg_state, {1: (1, _so3_state, _so4_state), 2: (2, _dense_state, _lowrank_state)})
+_by_kind(_omega_alg, _omega_by, {1: (1, _so3_omega, _so4_omega), 2: (2, _dense_omega, _lowrank_omega)})
+_by_kind(_alg_sq, _sq_by, {1: (1, _so3_sq, _so4_sq), 2: (2, _matrix_sq, _matrix_sq)})
+_by_kind(_alg_dinv, _dinv_by, {1: (1, _so3_dinv, _so4_dinv), 2: (2, _dense_dinv, _lowrank_dinv)})
+_by_kind(_alg_act, _act_by, {1: (1, _so3_act, _so4_act), 2: (2, _dense_act, _lowrank_act)})
+_by_kind(_alg_update, _update_by, {1: (1, _so3_update, _so4_update), 2: (2, _dense_update, _lowrank_update)})
+_by_kind(_alg_state, _state_by, {1: (1, _so3_state, _so4_state), 2: (2, _dense_state, _lowrank_state)})
