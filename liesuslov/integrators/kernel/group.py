@@ -259,6 +259,27 @@ def _scratch(Wf, vbf, n):
 
 
 @_jit
+def _basis_coordinates(Q, v, ra, y):
+    """y = Q[:, :ra]^T v: a vector's coordinates in the step's basis."""
+    n = Q.shape[0]
+    for i in range(ra):
+        acc = 0.0
+        for p in range(n):
+            acc += Q[p, i] * v[p]
+        y[i] = acc
+
+
+@_jit
+def _from_basis(Q, z, ra, v, add_v, out):
+    """out = (v if add_v else 0) + Q[:, :ra] z."""
+    for p in range(Q.shape[0]):
+        acc = v[p] if add_v else 0.0
+        for i in range(ra):
+            acc += Q[p, i] * z[i]
+        out[p] = acc
+
+
+@_jit
 def _g_low_rank(Gm, Q, F, ra, PQ, PQ2, Om, add_g):
     """``Om = (g if add_g else 0) + g Q F Q^T`` for g (n, n), Q (n, >= ra), F (ra, ra): O(n^2 ra)."""
     n = Q.shape[0]
@@ -356,25 +377,16 @@ def _dense_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
 
 @_jit
 def _lowrank_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
-    n = v.shape[0]
     ra = nc
     W, vb = _scratch(Wf, vbf, ra)
     Mb = _block(Th, r, ra, bufs[0])
     y = bufs[1][:ra]
     z = bufs[2][:ra]
-    for i in range(ra):
-        acc = 0.0
-        for p in range(n):
-            acc += Q[p, i] * v[p]
-        y[i] = acc
+    _basis_coordinates(Q, v, ra, y)
     _mat_act(chart, skew, Mb, sign, y, z, W, vb)
     for i in range(ra):
         z[i] -= y[i]
-    for p in range(n):
-        acc = v[p]
-        for i in range(ra):
-            acc += Q[p, i] * z[i]
-        out[p] = acc
+    _from_basis(Q, z, ra, v, True, out)
 
 
 # ====================================================================================== g phi(Th) or phi(-Th) Gamma
@@ -465,21 +477,13 @@ def _lowrank_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
     if mode == 1:
         y = bufs[1][:ra]
         z = bufs[2][:ra]
-        for i in range(ra):
-            acc = 0.0
-            for p in range(n):
-                acc += Q[p, i] * G1[p]
-            y[i] = acc
+        _basis_coordinates(Q, G1, ra, y)
         for i in range(ra):
             acc = 0.0
             for j in range(ra):
                 acc += Eb[i, j] * y[j]
             z[i] = acc
-        for p in range(n):
-            acc = 0.0
-            for i in range(ra):
-                acc += Q[p, i] * z[i]
-            out[p] = acc
+        _from_basis(Q, z, ra, G1, False, out)
         return
     _g_low_rank(G1.reshape((n, n)), Q, Eb, ra, PQ, PQ2, out.reshape((n, n)), False)
 
