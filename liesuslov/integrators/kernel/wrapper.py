@@ -99,13 +99,12 @@ def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool):
     terms = groups.bernoulli_coefficients(groups.dexpinv_terms(plan.order))[1:]
     bern = np.array(terms, dtype=float).reshape(-1, 2)
     E = 0 if problem.event_coef is None else int(problem.event_coef.shape[1])
-    nt = 0 if problem.t_eval is None else int(len(problem.t_eval))
     head = np.zeros(_NHEAD, dtype=np.int64)
     head[:] = (k, m, q, mode, CHARTS[problem.chart if mode else None], KINDS[kind], int(problem.skew),
                int(bool(cplan.has_gamma) and mode != 0), s, S, plan.err.shape[0], plan.dense.shape[1],
                int(plan.fsal), int(plan.new_in_step), int(problem.adaptive), int(problem.max_steps),
                int(problem.reproject), max(RENORM_EVERY, m), bern.shape[0], cplan.field_value.size,
-               cplan.omega_value.size, E, int(plan.order), int(record), r, a, nt)
+               cplan.omega_value.size, E, int(plan.order), int(record), r, a)
     term = np.zeros(E, np.int64) if E == 0 else np.asarray(problem.event_terminal, np.int64).reshape(E)
     dirn = np.zeros(E, np.int64) if E == 0 else np.asarray(problem.event_direction, np.int64).reshape(E)
     iprm = np.concatenate([head, cplan.field_index.ravel(), cplan.omega_index.ravel(), term, dirn]).astype(np.int64)
