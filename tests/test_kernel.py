@@ -476,3 +476,21 @@ def test_warm_compiles_every_kind_and_rejects_unknown_ones():
     with pytest.raises(ValueError, match="kind"):
         warm.run_kind("so5")
     assert set(warm.compile_kinds(["so3"], processes=1)) == {"so3"}
+
+
+def test_the_cache_is_stamped_with_every_kernel_source(tmp_path):
+    """numba stamps a cached function with its own file only; the kernel's functions embed code of other files
+    (groups/, control.py), so their stamp hashes all of them: a change in any one makes the cache stale."""
+    from liesuslov.integrators.kernel import common, loop
+
+    names = {(p.parent.name, p.name) for p in common.KERNEL_SOURCES}
+    assert {("kernel", "loop.py"), ("kernel", "group.py"), ("groups", "so3.py"), ("groups", "so4.py"),
+            ("integrators", "control.py")} <= names
+    for fn in (loop._solve_one, common._accept_factor):
+        assert fn._cache._cache_file._source_stamp == common.sources_stamp(common.KERNEL_SOURCES)
+    a, b = tmp_path / "a.py", tmp_path / "b.py"
+    a.write_text("x = 1\n")
+    b.write_text("y = 2\n")
+    before = common.sources_stamp([a, b])
+    b.write_text("y = 3\n")  # the second file alone changes
+    assert common.sources_stamp([a, b]) != before

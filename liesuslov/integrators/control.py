@@ -23,13 +23,19 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SAFETY", "MIN_FACTOR", "MAX_FACTOR", "scale", "combine", "accept_factor", "reject_factor",
+__all__ = ["SAFETY", "MIN_FACTOR", "MAX_FACTOR", "select", "scale", "combine", "accept_factor", "reject_factor",
            "initial_step", "probe_step"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 # Added under the square root of DOP853's combination so that S5 = S3 = 0 gives 0, not 0/0 (it changes
 # nothing above 1e-284).
 _TINY = 1e-300
+
+
+def select(cond, a, b):
+    """``a`` where ``cond``, else ``b``: ``np.where`` on arrays; the compiled kernel registers the scalar
+    ``a if cond else b`` for it (numba's ``np.where`` on scalars goes through 0-d arrays, ~1 s of compilation)."""
+    return np.where(cond, a, b)
 
 
 def scale(y0, y1, rtol, atol):
@@ -50,12 +56,12 @@ def combine(s5, s3, ncomp, two):
 def accept_factor(err, exponent, after_reject):
     """Growth of the step after an accepted step: ``min(10, 0.9 err^exponent)``, capped at 1 after a rejection."""
     f = np.minimum(MAX_FACTOR, SAFETY * np.maximum(err, _TINY) ** exponent)
-    return np.where(after_reject, np.minimum(1.0, f), f)
+    return select(after_reject, np.minimum(1.0, f), f)
 
 
 def reject_factor(err, exponent):
     """Shrink factor after a rejected step: ``max(0.2, 0.9 err^exponent)``; 0.2 for a NaN or inf norm."""
-    return np.where(err < np.inf, np.maximum(MIN_FACTOR, SAFETY * err ** exponent), MIN_FACTOR)
+    return select(err < np.inf, np.maximum(MIN_FACTOR, SAFETY * err ** exponent), MIN_FACTOR)
 
 
 def initial_step(d0, d1, d2, h0, order):
@@ -65,10 +71,10 @@ def initial_step(d0, d1, d2, h0, order):
     ``d2 = |f(y0 + h0 f0) - f(y0)| / h0``; returns ``min(100 h0, (0.01 / max(d1, d2))^(1 / (order + 1)))``.
     """
     big = np.maximum(d1, d2)
-    h1 = np.where(big <= 1e-15, np.maximum(1e-6, h0 * 1e-3), (0.01 / np.maximum(big, 1e-300)) ** (1.0 / (order + 1)))
+    h1 = select(big <= 1e-15, np.maximum(1e-6, h0 * 1e-3), (0.01 / np.maximum(big, 1e-300)) ** (1.0 / (order + 1)))
     return np.minimum(100.0 * h0, h1)
 
 
 def probe_step(d0, d1):
     """The probe step of :func:`initial_step`: ``0.01 d0 / d1``, or 1e-6 when either norm is below 1e-5."""
-    return np.where((d0 < 1e-5) | (d1 < 1e-5), 1e-6, 0.01 * d0 / np.maximum(d1, 1e-300))
+    return select((d0 < 1e-5) | (d1 < 1e-5), 1e-6, 0.01 * d0 / np.maximum(d1, 1e-300))

@@ -3,7 +3,12 @@
 
 from __future__ import annotations
 
-from numba import njit
+import hashlib
+from pathlib import Path
+
+from numba import njit, types
+from numba.core.caching import FunctionCache, IndexDataCacheFile
+from numba.extending import overload
 
 from ... import groups
 from .. import control
@@ -20,14 +25,53 @@ LOWRANK_MIN_N = 8
 EVENT_CAP = 16
 
 
-#: Options of every compiled function of the kernel (the kind implementations of :mod:`.group` too).
-_JIT_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
+#: Options of every compiled function of the kernel; :func:`_jit` adds the on-disk cache.
+_JIT_OPTIONS = {"nogil": True, "error_model": "numpy"}
+
+
+def sources_stamp(paths) -> bytes:
+    """sha256 over the contents of ``paths`` (in the given order): the freshness stamp of the kernel's cache."""
+    digest = hashlib.sha256()
+    for path in paths:
+        digest.update(Path(path).read_bytes())
+    return digest.digest()
+
+
+_PACKAGE = Path(__file__).resolve().parents[2]
+#: Every source file whose code is compiled into the kernel's functions.
+KERNEL_SOURCES = tuple(sorted([*(_PACKAGE / "integrators" / "kernel").glob("*.py"),
+                               _PACKAGE / "integrators" / "control.py", *(_PACKAGE / "groups").glob("*.py")]))
+_STAMP = sources_stamp(KERNEL_SOURCES)
+
+
+class _KernelCache(FunctionCache):
+    """numba's on-disk cache of one function, fresh only while *every* kernel source is unchanged.
+
+    numba stamps a cached function with its own file's contents, but a compiled caller embeds its callees'
+    code: after a change in a callee's file alone (``groups/so3.py`` under the loop of ``loop.py``), numba
+    would load the caller compiled from the old callee. The stamp here covers :data:`KERNEL_SOURCES`.
+    """
+
+    def __init__(self, py_func):
+        super().__init__(py_func)
+        self._cache_file = IndexDataCacheFile(cache_path=self._cache_path, filename_base=self._impl.filename_base,
+                                              source_stamp=_STAMP)
 
 
 def _jit(fn):
-    """``fn`` compiled with :data:`_JIT_OPTIONS`; also the scalar formulas of :mod:`control` and
-    :mod:`liesuslov.groups`, compiled as they stand."""
-    return njit(**_JIT_OPTIONS)(fn)
+    """``fn`` compiled with :data:`_JIT_OPTIONS` and cached on disk under the kernel's stamp (:class:`_KernelCache`);
+    also the scalar formulas of :mod:`control` and :mod:`liesuslov.groups`, compiled as they stand."""
+    dispatcher = njit(**_JIT_OPTIONS)(fn)
+    dispatcher._cache = _KernelCache(fn)
+    return dispatcher
+
+
+@overload(control.select, inline="always")
+def _select_scalar(cond, a, b):
+    """:func:`control.select` on scalars, as the compiled formulas below call it."""
+    if isinstance(cond, types.Boolean):
+        return lambda cond, a, b: a if cond else b
+    return None
 
 
 _scale = _jit(control.scale)

@@ -3,12 +3,13 @@ the low-rank Fedorov–Kozlov basis, so4 pairs (p, q) in :mod:`.so4`): Omega, dp
 update of g, the state error.
 
 Each operation of the group part (``_omega_alg``, ``_alg_sq``, ``_alg_dinv``, ``_alg_act``, ``_alg_update``,
-``_alg_state``) is a stub that only compiled code calls, with the kind's code as its first argument, a
-numba literal (the loop is compiled once per kind: :func:`.loop._solve_one` takes ``kind`` as a literal).
-:func:`_by_kind` registers, for each stub, the implementation of each kind (plain functions with the stub's
-signature, compiled when a loop of that kind is): a kind's loop therefore compiles its own group code
-only — the so(3) loop none of the matrix algorithms. Adding a kind is one implementation per operation and
-one entry in each table at the end of this module.
+``_alg_state``) is a stub that only compiled code calls, with the *family* of the kinds as its first
+argument, a numba literal (the loop is compiled once per family: :func:`.loop._solve_one` takes ``family``
+as a literal, :data:`.common.FAMILIES`), and the kind itself as a run-time value. :func:`_by_kind`
+registers, for each stub, the implementations of a family's two kinds (plain functions with the stub's
+signature, inlined where the stub is called): a family's loop therefore compiles its own group code only —
+the closed-form loop (so3, so4) none of the matrix algorithms. Adding a kind is one implementation per
+operation and one entry in each table at the end of this module.
 """
 
 from __future__ import annotations

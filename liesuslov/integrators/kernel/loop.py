@@ -378,6 +378,29 @@ def _outputs(family, kind, chart, skew, mode, bi, ie, t_eval, t_lim, t, h, t_new
 
 
 @_jit
+def _record(t_rec, xi_rec, G_rec, n, t, xi, G):
+    """Row ``n`` of the every-step record: ``t_rec[n] = t``, ``xi_rec[n] = xi``, ``G_rec[n] = G``, the storage
+    doubled first when full; returns the (possibly new) three arrays. Element loops, not slice assignments:
+    those compile numba's shape-mismatch message (string formatting, ~5 s of a cold compile)."""
+    if n == t_rec.shape[0]:
+        cap = 2 * n
+        t2, x2, g2 = np.zeros(cap), np.zeros((cap, xi_rec.shape[1])), np.zeros((cap, G_rec.shape[1]))
+        for i in range(n):
+            t2[i] = t_rec[i]
+            for c in range(x2.shape[1]):
+                x2[i, c] = xi_rec[i, c]
+            for c in range(g2.shape[1]):
+                g2[i, c] = G_rec[i, c]
+        t_rec, xi_rec, G_rec = t2, x2, g2
+    t_rec[n] = t
+    for c in range(xi.shape[0]):
+        xi_rec[n, c] = xi[c]
+    for c in range(G.shape[0]):
+        G_rec[n, c] = G[c]
+    return t_rec, xi_rec, G_rec
+
+
+@_jit
 def _reproject(mode, G, Wg):
     """Back onto the group: one Newton–Schulz step for g (mode g), |Gamma| = 1 (mode gamma)."""
     if mode == 2:
@@ -514,10 +537,9 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
             G[c] = G0[bi, c]
         gam = gamma[bi]
         rec_n = 0
-        rec_cap = 64 if record else 0
-        t_rec = np.zeros(rec_cap)
-        xi_rec = np.zeros((rec_cap, k))
-        G_rec = np.zeros((rec_cap, q))
+        t_rec = np.zeros(64 if record else 0)
+        xi_rec = np.zeros((t_rec.shape[0], k))
+        G_rec = np.zeros((t_rec.shape[0], q))
         for e in range(E):
             ev_needG[e] = False
             for c in range(q):
@@ -548,9 +570,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                     G_out[ie, bi, c] = G[c]
                 ie += 1
             if record:
-                t_rec[0] = t0
-                xi_rec[0, :] = xi
-                G_rec[0, :] = G
+                t_rec, xi_rec, G_rec = _record(t_rec, xi_rec, G_rec, 0, t0, xi, G)
                 rec_n = 1
         _event_values(bi, ev_coef, ev_off, xi, G, gold)
         h = hfix * direction
@@ -738,18 +758,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                 f0_ok = False  # the state moved: stage 0 is evaluated again
                 _reproject(mode, G, Wg)
             if record:
-                if rec_n == rec_cap:
-                    rec_cap *= 2
-                    t2 = np.zeros(rec_cap)
-                    x2 = np.zeros((rec_cap, k))
-                    g2 = np.zeros((rec_cap, q))
-                    t2[:rec_n] = t_rec[:rec_n]
-                    x2[:rec_n] = xi_rec[:rec_n]
-                    g2[:rec_n] = G_rec[:rec_n]
-                    t_rec, xi_rec, G_rec = t2, x2, g2
-                t_rec[rec_n] = t
-                xi_rec[rec_n, :] = xi
-                G_rec[rec_n, :] = G
+                t_rec, xi_rec, G_rec = _record(t_rec, xi_rec, G_rec, rec_n, t, xi, G)
                 rec_n += 1
             if adaptive:
                 h = h * _accept_factor(nrm, expo, after_reject)
