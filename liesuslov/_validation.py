@@ -6,6 +6,7 @@ stay readable: ``x = as_float_array(x, "Omega0")``.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -51,7 +52,7 @@ def as_float_array(x: Any, name: str, *, ndim_min: int = 0, tail: tuple[int, ...
         if arr.ndim < len(tail) or arr.shape[arr.ndim - len(tail):] != tuple(tail):
             want = "(..., " + ", ".join(str(t) for t in tail) + ")"
             raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
-    if finite and not np.all(np.isfinite(arr)):
+    if finite and not np.isfinite(arr).all():
         raise ValueError(f"{name} contains NaN or infinite values; pass finite numbers")
     return arr
 
@@ -64,13 +65,16 @@ def _has_complex(x: Any) -> bool:
 
 def check_real(x: Any, name: str) -> float:
     """Return ``x`` as a float after checking it is a finite real number."""
-    if np.iscomplexobj(x):
-        raise TypeError(f"{name} must be a real number, got the complex {x!r}")
-    try:
+    if type(x) is float or type(x) is int:  # the common case, without numpy's type inspection (~3 µs)
         val = float(x)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real number, got {type(x).__name__}") from exc
-    if not np.isfinite(val):
+    else:
+        if np.iscomplexobj(x):
+            raise TypeError(f"{name} must be a real number, got the complex {x!r}")
+        try:
+            val = float(x)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"{name} must be a real number, got {type(x).__name__}") from exc
+    if not math.isfinite(val):
         raise ValueError(f"{name} must be finite, got {x!r}")
     return val
 
@@ -131,7 +135,7 @@ def check_t_span(t_span) -> tuple[float, float]:
         t0, t1 = (float(v) for v in t_span)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"t_span must be a pair of numbers (t0, t1), got {t_span!r}") from exc
-    if not (np.isfinite(t0) and np.isfinite(t1)):
+    if not (math.isfinite(t0) and math.isfinite(t1)):
         raise ValueError(f"t_span must be finite, got {t_span!r}")
     if t0 == t1:
         raise ValueError(f"t_span must have t0 != t1, got {t_span!r}")

@@ -105,7 +105,8 @@ class Subspace:
         x = np.asarray(x, dtype=float)
         tol = self.tol * 10 if tol is None else tol
         r = x - (x @ self.basis.T) @ self.basis
-        return np.linalg.norm(r, axis=-1) <= tol * np.maximum(1.0, np.linalg.norm(x, axis=-1))
+        # squared norms (both sides >= 0): the same test without np.linalg.norm's overhead
+        return (r * r).sum(axis=-1) <= tol * tol * np.maximum(1.0, (x * x).sum(axis=-1))
 
     def complement(self) -> Subspace:
         """The orthogonal complement for the pairing (the span of the constraint covectors)."""

@@ -7,6 +7,7 @@ own (own steps, status and events), and the :class:`~.problem.RawResult` becomes
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -17,10 +18,9 @@ from ..algebra.elements import body_vector, omega_coordinates
 from ..mechanics.protocol import ModelProtocol
 from .charts import CHARTS
 from .events import EventRecord, LinearEvent, event_flags
-from .plan import make_plan
+from .plan import plan_for
 from .problem import FAILURES, Problem, RawResult
 from .solution import Solution
-from .tableaux import get_tableau
 
 __all__ = ["integrate", "METHODS", "Method", "BACKENDS"]
 
@@ -122,7 +122,8 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     """
     from ..mechanics import SuslovSystem
 
-    is_model = isinstance(system, ModelProtocol) and not isinstance(system, SuslovSystem)
+    # the SuslovSystem test first: a runtime Protocol check walks the class's attributes (~20 µs a call)
+    is_model = not isinstance(system, SuslovSystem) and isinstance(system, ModelProtocol)
     if not (isinstance(system, SuslovSystem) or is_model):
         raise TypeError(f"system must be a SuslovSystem (or a model such as system.model()), "
                         f"got {type(system).__name__}")
@@ -159,8 +160,8 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         step0 = check_positive(h, "h")
     te = check_t_eval(t_eval, t0, t1)
     model, x0, G0, g_init, batch_shape = _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form)
-    B = int(np.prod(batch_shape))
-    plan = make_plan(get_tableau(meth.tableau))
+    B = math.prod(batch_shape)
+    plan = plan_for(meth.tableau)
     problem = _problem(model, plan, chart, x0, G0, g_init, batch_shape, t0, t1, meth.adaptive, step0, rtol, atol,
                        int(max_steps), te, events, bool(reproject))
     if te is None and B > 1:
@@ -195,7 +196,7 @@ def _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form):
     # the constraints of the scene, also for the multiplier form (whose own subspace is the whole algebra)
     D = getattr(getattr(model, "system", None), "constraints", None) or model.subspace
     inside = D.contains(x0, 1e-9)
-    if not np.all(inside):
+    if not inside.all():
         dist = np.max(np.linalg.norm(x0 - D.project(x0), axis=-1))
         raise ValueError(f"Omega0 is not in the constraint subspace D (distance {dist:.3g}); "
                          "project it first, e.g. D.project(omega) with D = system.constraints")
@@ -219,10 +220,10 @@ def _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form):
     elif g0 is not None:
         raise ValueError("g0 was given but reconstruct=False; pass reconstruct=True to integrate g")
     try:
-        batch_shape = np.broadcast_shapes(*shapes)
+        batch_shape = np.broadcast_shapes(*shapes) if len(shapes) > 1 else shapes[0]
     except ValueError as exc:
         raise ValueError(f"the batch axes of Omega0, Gamma0 and g0 do not broadcast: {shapes}") from exc
-    if int(np.prod(batch_shape)) == 0:
+    if math.prod(batch_shape) == 0:
         raise ValueError(f"the batch of initial data is empty (batch shape {batch_shape}); pass at least one "
                          "Omega0")
     return model, x0, G0_, g_init, batch_shape
@@ -230,7 +231,7 @@ def _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form):
 
 def _problem(model, plan, chart, x0, G0, g_init, batch_shape, t0, t1, adaptive, step0, rtol, atol, max_steps, te,
              events, reproject) -> Problem:
-    B = int(np.prod(batch_shape))
+    B = math.prod(batch_shape)
     k = int(model.k)
     xi = model.xi_from_coords(np.broadcast_to(x0, batch_shape + x0.shape[-1:]).reshape(B, -1))
     xi = np.ascontiguousarray(xi, dtype=float)
@@ -345,7 +346,7 @@ def _solution(raw: RawResult, P: Problem, batch_shape, method, chart, wall, reas
     bs = batch_shape if P.t_eval is not None else (1,) * len(batch_shape)
     xi = raw.xi.reshape((N,) + bs + (P.k,))
     omega = model.omega_coords(xi)
-    g, Gamma = _group_arrays(P, raw.G, (N,) + bs, np.broadcast_to(np.arange(P.B).reshape(batch_shape), bs))
+    g, Gamma = _group_arrays(P, raw.G, (N,) + bs, lambda: np.broadcast_to(np.arange(P.B).reshape(batch_shape), bs))
     status = raw.status.reshape(batch_shape)
     stats = {"nfev": int(raw.nfev.sum()), "steps": int(raw.steps.sum()), "rejected": int(raw.rejected.sum()),
              "method": method, "chart": P.chart, "form": model.form, "backend": raw.backend,
@@ -356,7 +357,7 @@ def _solution(raw: RawResult, P: Problem, batch_shape, method, chart, wall, reas
     records = []
     for e in range(P.n_events):
         idx = raw.event_index[e]
-        ge, Ge = _group_arrays(P, raw.event_G[e][:, None, :], (idx.size, 1), idx[:, None])
+        ge, Ge = _group_arrays(P, raw.event_G[e][:, None, :], (idx.size, 1), lambda idx=idx: idx[:, None])
         records.append(EventRecord(t=raw.event_t[e], index=idx, omega=model.omega_coords(raw.event_xi[e]),
                                    Gamma=None if Ge is None else Ge[:, 0], g=None if ge is None else ge[:, 0],
                                    n=model.n, algebra_name=model.algebra.name))
@@ -365,13 +366,14 @@ def _solution(raw: RawResult, P: Problem, batch_shape, method, chart, wall, reas
                     events=records)
 
 
-def _group_arrays(P: Problem, G: np.ndarray, lead: tuple, which: np.ndarray):
-    """``(g, Gamma)`` from the flat group part G (..., B, q) of the trajectories ``which`` (lead-shaped)."""
+def _group_arrays(P: Problem, G: np.ndarray, lead: tuple, which):
+    """``(g, Gamma)`` from the flat group part G (..., B, q) of the trajectories ``which()`` (lead-shaped; a
+    callable, as only Gamma = g^T gamma needs them)."""
     if P.mode == "g":
         g = G.reshape(lead + (P.m, P.m))
         Gamma = None
         if P.model.has_gamma:
-            gam = P.gamma[np.asarray(which)]  # (…, n) per trajectory, broadcast over time
+            gam = P.gamma[np.asarray(which())]  # (…, n) per trajectory, broadcast over time
             Gamma = body_vector(g, gam)
         return g, Gamma
     if P.mode == "gamma":
@@ -380,6 +382,8 @@ def _group_arrays(P: Problem, G: np.ndarray, lead: tuple, which: np.ndarray):
 
 
 def _message(raw: RawResult) -> str:
+    if not raw.status.any():
+        return "The solver successfully reached the end of the integration interval."
     failed = np.flatnonzero(raw.status < 0)
     stopped = int(np.sum(raw.status == 1))
     if failed.size:

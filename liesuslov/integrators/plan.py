@@ -30,13 +30,14 @@ evaluated. A rejected step keeps stage 0.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
-from .tableaux import ButcherTableau
+from .tableaux import ButcherTableau, get_tableau
 
-__all__ = ["StagePlan", "make_plan", "dense_weights"]
+__all__ = ["StagePlan", "make_plan", "plan_for", "dense_weights"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,6 +139,13 @@ def make_plan(tableau: ButcherTableau) -> StagePlan:
                      error_order=int(tableau.error_order or 0), dense_order=dense_order,
                      error_exponent=float(tableau.error_exponent or 0.0), fsal=fsal, new_in_step=new_in_step,
                      step_stages=s + int(new_in_step))
+
+
+@functools.cache
+def plan_for(name: str) -> StagePlan:
+    """The stage plan of the tableau called ``name`` (:func:`~.tableaux.get_tableau`), built once: a plan is
+    immutable (frozen, read-only arrays), so every solve of the method shares it."""
+    return make_plan(get_tableau(name))
 
 
 def dense_weights(dense: np.ndarray, theta):

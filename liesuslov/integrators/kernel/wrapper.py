@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numba
 import numpy as np
 from numba import njit
@@ -89,6 +91,15 @@ def _check_fedorov_kozlov(model) -> None:
 
 
 
+@functools.cache
+def _bernoulli_pairs(order: int) -> np.ndarray:
+    """The dexp⁻¹ series coefficients a method of ``order`` needs, as (term, 2) rows (read-only, shared)."""
+    terms = groups.bernoulli_coefficients(groups.dexpinv_terms(order))[1:]
+    pairs = np.array(terms, dtype=float).reshape(-1, 2)
+    pairs.setflags(write=False)
+    return pairs
+
+
 def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool):
     plan = problem.plan
     mode = MODES[problem.mode]
@@ -96,8 +107,7 @@ def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool):
     S, s = plan.S, plan.s
     r = S + 1 if kind == "lowrank" else 0
     a = {None: 0, "so3": 3, "so4": 6, "dense": m * m, "lowrank": r * r}[kind]
-    terms = groups.bernoulli_coefficients(groups.dexpinv_terms(plan.order))[1:]
-    bern = np.array(terms, dtype=float).reshape(-1, 2)
+    bern = _bernoulli_pairs(int(plan.order))
     E = 0 if problem.event_coef is None else int(problem.event_coef.shape[1])
     head = np.zeros(_NHEAD, dtype=np.int64)
     head[:] = (k, m, q, mode, CHARTS[problem.chart if mode else None], KINDS[kind], int(problem.skew),
@@ -176,7 +186,7 @@ def solve(problem: Problem) -> RawResult:
             t_rec, xi_rec, G_rec = solve_one(0, 1, *args)
         else:
             _solve_batch(solve_one, *args)
-        top = int(ev_count.max(initial=0))
+        top = int(ev_count.max()) if E else 0
         if top <= cap:
             break
         cap = top  # deterministic: the same run again with room for every crossing
