@@ -21,7 +21,7 @@ from numba.extending import overload
 
 from .common import _JIT_OPTIONS, _jit
 from .maps import _dexp3_coefficient, _mat_act, _mat_dinv, _mat_phi, _mm, _so3_coef
-from .so4 import _so4_act, _so4_dinv, _so4_omega, _so4_sq, _so4_state, _so4_update
+from .so4 import _so4_dinv, _so4_omega, _so4_rotate, _so4_sq, _so4_state, _so4_update
 
 
 # ====================================================================================== the model
@@ -131,13 +131,61 @@ def _state_by(first_kind, first, other):
     return impl
 
 
-def _by_kind(stub, by, table: dict) -> None:
-    """Register ``stub``'s implementations: with a literal family f, ``by(*table[f])``."""
+# The closed forms (family 1: so3 = kind 1, so4) take only what they read: every array passed to a call that
+# LLVM does not inline is unpacked into its fields on the way (~10 ns a step per unused scratch array).
+def _omega_closed(so3, so4):
+    def impl(family, kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
+        if kind == 1:
+            so3(skew, x, widx, wval, Om, out)
+        else:
+            so4(skew, x, widx, wval, Om, out)
+        return nc
+    return impl
+
+
+def _dinv_closed(so3, so4):
+    def impl(family, kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+        if kind == 1:
+            so3(chart, Th, Om, h, out)
+        else:
+            so4(chart, Th, Om, h, out, bern)
+    return impl
+
+
+def _act_closed(so3, so4):
+    def impl(family, kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
+        if kind == 1:
+            so3(chart, Th, sign, v, out)
+        else:
+            so4(chart, Th, sign, v, out)
+    return impl
+
+
+def _update_closed(so3, so4):
+    def impl(family, kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+        if kind == 1:
+            so3(chart, mode, G, Th, out)
+        else:
+            so4(chart, mode, G, Th, out)
+    return impl
+
+
+def _state_closed(so3, so4):
+    def impl(family, kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+        if kind == 1:
+            so3(mode, G1, Ea, out)
+        else:
+            so4(mode, G1, Ea, out)
+    return impl
+
+
+def _by_kind(stub, table: dict) -> None:
+    """Register ``stub``'s implementations: with a literal family f, ``table[f]``."""
 
     @overload(stub, prefer_literal=True, strict=False, inline="always", jit_options=_JIT_OPTIONS)
     def _typer(family, *args):
         if isinstance(family, types.IntegerLiteral) and family.literal_value in table:
-            return by(*table[family.literal_value])
+            return table[family.literal_value]
         return None
 
 
@@ -158,12 +206,20 @@ def _omega_matrix(skew, x, widx, wval, Om):
 
 
 @_jit
-def _so3_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
-    _omega_matrix(skew, x, widx, wval, Om)
-    out[0] = Om[2, 1]
-    out[1] = Om[0, 2]
-    out[2] = Om[1, 0]
-    return nc
+def _so3_omega(skew, x, widx, wval, Om, out):
+    """out = (X21, X02, X10) of Omega(x), straight from the upper triangle of the probed map (rows (a, r, c),
+    r < c): X01 = -X10, X02, X12 = -X21 (no matrix: Om is not used)."""
+    out[0] = 0.0
+    out[1] = 0.0
+    out[2] = 0.0
+    for t in range(wval.shape[0]):
+        v = wval[t] * x[widx[t, 0]]
+        if widx[t, 1] == 1:
+            out[0] -= v
+        elif widx[t, 2] == 2:
+            out[1] += v
+        else:
+            out[2] -= v
 
 
 @_jit
@@ -308,7 +364,7 @@ def _g_low_rank(Gm, Q, F, ra, PQ, PQ2, Om, add_g):
 
 # ====================================================================================== h dphi^{-1}
 @_jit
-def _so3_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+def _so3_dinv(chart, Th, Om, h, out):
     t0, t1, t2_ = Th[0], Th[1], Th[2]
     a0, a1, a2 = Om[0], Om[1], Om[2]
     tt = t0 * t0 + t1 * t1 + t2_ * t2_
@@ -365,11 +421,6 @@ def _so3_rotate(chart, Th, sign, v, out):
 
 
 @_jit
-def _so3_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
-    _so3_rotate(chart, Th, sign, v, out)
-
-
-@_jit
 def _dense_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
     n = v.shape[0]
     W, vb = _scratch(Wf, vbf, n)
@@ -392,7 +443,7 @@ def _lowrank_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
 
 # ====================================================================================== g phi(Th) or phi(-Th) Gamma
 @_jit
-def _so3_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+def _so3_update(chart, mode, G, Th, out):
     if mode == 1:
         _so3_rotate(chart, Th, -1.0, G, out)
         return
@@ -441,7 +492,7 @@ def _lowrank_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs
 
 # ====================================================================================== the state's error
 @_jit
-def _so3_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+def _so3_state(mode, G1, Ea, out):
     e0, e1, e2 = Ea[0], Ea[1], Ea[2]
     if mode == 1:
         v0, v1, v2 = G1[0], G1[1], G1[2]
@@ -491,9 +542,9 @@ def _lowrank_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
 
 # ============================================================================ the tables (codes: common.KINDS)
 # family 1 (closed forms): so3, so4 (and mode "none", which calls none of these); family 2 (matrices): dense, lowrank
-_by_kind(_omega_alg, _omega_by, {1: (1, _so3_omega, _so4_omega), 2: (2, _dense_omega, _lowrank_omega)})
-_by_kind(_alg_sq, _sq_by, {1: (1, _so3_sq, _so4_sq), 2: (2, _matrix_sq, _matrix_sq)})
-_by_kind(_alg_dinv, _dinv_by, {1: (1, _so3_dinv, _so4_dinv), 2: (2, _dense_dinv, _lowrank_dinv)})
-_by_kind(_alg_act, _act_by, {1: (1, _so3_act, _so4_act), 2: (2, _dense_act, _lowrank_act)})
-_by_kind(_alg_update, _update_by, {1: (1, _so3_update, _so4_update), 2: (2, _dense_update, _lowrank_update)})
-_by_kind(_alg_state, _state_by, {1: (1, _so3_state, _so4_state), 2: (2, _dense_state, _lowrank_state)})
+_by_kind(_omega_alg, {1: _omega_closed(_so3_omega, _so4_omega), 2: _omega_by(2, _dense_omega, _lowrank_omega)})
+_by_kind(_alg_sq, {1: _sq_by(1, _so3_sq, _so4_sq), 2: _sq_by(2, _matrix_sq, _matrix_sq)})
+_by_kind(_alg_dinv, {1: _dinv_closed(_so3_dinv, _so4_dinv), 2: _dinv_by(2, _dense_dinv, _lowrank_dinv)})
+_by_kind(_alg_act, {1: _act_closed(_so3_rotate, _so4_rotate), 2: _act_by(2, _dense_act, _lowrank_act)})
+_by_kind(_alg_update, {1: _update_closed(_so3_update, _so4_update), 2: _update_by(2, _dense_update, _lowrank_update)})
+_by_kind(_alg_state, {1: _state_closed(_so3_state, _so4_state), 2: _state_by(2, _dense_state, _lowrank_state)})

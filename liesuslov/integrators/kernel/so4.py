@@ -7,14 +7,14 @@ does not import numba): jitted code calls the original function objects, and gro
 other compile through the same registration. Two do not compile — :func:`~liesuslov.groups.so4._so4_pq_c`
 reads numpy arrays by ``X.size`` / ``X.item`` with a batch branch, and
 :func:`~liesuslov.groups.dexp._dexpinv_so3_poly` walks a tuple with ``reversed`` (its coefficients come
-from the cached, rational :func:`~liesuslov.groups.dexp._dexpinv_so3_series`): :func:`_so4_pair` and the
-loop in :func:`_so4_dinv` are their scalar branches.
+from the cached, rational :func:`~liesuslov.groups.dexp._dexpinv_so3_series`): :func:`_so4_omega` (entry by
+entry) and the loop in :func:`_so4_dinv` are their scalar branches.
 
-The operations (:func:`_so4_omega`, :func:`_so4_sq`, :func:`_so4_dinv`, :func:`_so4_act`, :func:`_so4_update`,
-:func:`_so4_state`) have the signatures of the group part's operations in :mod:`.group` (``_omega_alg``,
-``_alg_sq``, ``_alg_dinv``, ``_alg_act``, ``_alg_update``, ``_alg_state``), which run them for kind 4. They
-need no scratch (the loop's W, vb, bufs, Q, PQ may be empty): every value is a local scalar, and Om's upper
-triangle is the only array written besides ``out``.
+The operations (:func:`_so4_omega`, :func:`_so4_sq`, :func:`_so4_dinv`, :func:`_so4_rotate`, :func:`_so4_update`,
+:func:`_so4_state`) implement the group part's operations of :mod:`.group` (``_omega_alg``, ``_alg_sq``,
+``_alg_dinv``, ``_alg_act``, ``_alg_update``, ``_alg_state``) for kind 4, with only the arguments they read
+(the closed-form family's dispatch in :mod:`.group` passes those): every value is a local scalar, and Om's
+upper triangle is the only array written besides ``out``.
 """
 
 from __future__ import annotations
@@ -45,28 +45,28 @@ _so4_mat_c = _g4._so4_mat_c
 
 # ====================================================================================== the operations of kind 4
 @_jit
-def _so4_pair(Om, out):
-    """out = (p, q) of the 4×4 skew matrix Om, upper triangle read: the single-matrix branch of
-    :func:`~liesuslov.groups.so4._so4_pq_c`."""
-    x01, x02, x03, x12, x13, x23 = Om[0, 1], Om[0, 2], Om[0, 3], Om[1, 2], Om[1, 3], Om[2, 3]
-    out[0] = 0.5 * (x01 + x23)
-    out[1] = 0.5 * (x02 - x13)
-    out[2] = 0.5 * (x03 + x12)
-    out[3] = 0.5 * (x01 - x23)
-    out[4] = 0.5 * (x02 + x13)
-    out[5] = 0.5 * (x03 - x12)
-
-
-@_jit
-def _so4_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
-    """out = (p, q) of Omega(x): the upper triangle of the probed linear map (rows ``(a, r, c)``, r < c)."""
-    for i in range(4):
-        for j in range(i + 1, 4):
-            Om[i, j] = 0.0
+def _so4_omega(skew, x, widx, wval, Om, out):
+    """out = (p, q) of Omega(x), straight from the upper triangle of the probed map (rows ``(a, r, c)``,
+    r < c), by the formulas of ``_so4_pq_c`` entry by entry: X01, X23 feed p0 and q0, X02, X13 p1 and q1,
+    X03, X12 p2 and q2 (halved; the signs of X13 in p, of X23 and X12 in q are minus). Om is not used."""
+    for i in range(6):
+        out[i] = 0.0
     for t in range(wval.shape[0]):
-        Om[widx[t, 1], widx[t, 2]] += wval[t] * x[widx[t, 0]]
-    _so4_pair(Om, out)
-    return nc
+        v = 0.5 * wval[t] * x[widx[t, 0]]
+        r, c = widx[t, 1], widx[t, 2]
+        if r == 0:  # (0, c): p_{c-1} and q_{c-1}, both +
+            out[c - 1] += v
+            out[c + 2] += v
+        elif c == 3:  # (1, 3): p1 -, q1 +;  (2, 3): p0 +, q0 -
+            if r == 1:
+                out[1] -= v
+                out[4] += v
+            else:
+                out[0] += v
+                out[3] -= v
+        else:  # (1, 2): p2 +, q2 -
+            out[2] += v
+            out[5] -= v
 
 
 @_jit
@@ -79,7 +79,7 @@ def _so4_sq(kind, Th):
 
 
 @_jit
-def _so4_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+def _so4_dinv(chart, Th, Om, h, out, bern):
     """out = h dphi^{-1}_{-Th}(Om): exp the truncated series on each factor (the terms of ``bern``, rows
     ``(k, B_k/k!)`` for k >= 1), Cayley exact."""
     p = (Th[0], Th[1], Th[2])
@@ -132,11 +132,6 @@ def _so4_rotate(chart, Th, sign, v, out):
 
 
 @_jit
-def _so4_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
-    _so4_rotate(chart, Th, sign, v, out)
-
-
-@_jit
 def _mul_right(G, M, out):
     """out = G M, G stored flat row-major (16), M the 16 entries of a 4×4 matrix (a row-major tuple)."""
     m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23, m30, m31, m32, m33 = M
@@ -149,7 +144,7 @@ def _mul_right(G, M, out):
 
 
 @_jit
-def _so4_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+def _so4_update(chart, mode, G, Th, out):
     """``g phi(Th)`` (mode g, g flat row-major) or ``phi(-Th) Gamma`` (mode gamma)."""
     if mode == 1:
         _so4_rotate(chart, Th, -1.0, G, out)
@@ -164,7 +159,7 @@ def _so4_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ
 
 
 @_jit
-def _so4_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+def _so4_state(mode, G1, Ea, out):
     """``g1 E`` (mode g, 16 entries) or ``E Gamma1`` (mode gamma, 4), E the matrix of the pair Ea."""
     E = _so4_mat_c((0.0, 1.0, 1.0, 0.0), (Ea[0], Ea[1], Ea[2]), (Ea[3], Ea[4], Ea[5]))
     if mode != 1:
