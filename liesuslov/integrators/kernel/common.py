@@ -74,6 +74,12 @@ def _select_scalar(cond, a, b):
     return None
 
 
+def _jit_inline(fn):
+    """``fn`` inlined into its callers at numba IR level (no compiled function, nor cache, of its own): the
+    small functions of every stage, where a call that LLVM does not inline costs as much as the body."""
+    return njit(inline="always", **_JIT_OPTIONS)(fn)
+
+
 _scale = _jit(control.scale)
 _combine = _jit(control.combine)
 _accept_factor = _jit(control.accept_factor)

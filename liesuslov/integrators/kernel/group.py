@@ -19,13 +19,13 @@ import math
 from numba import types
 from numba.extending import overload
 
-from .common import _JIT_OPTIONS, _jit
+from .common import _JIT_OPTIONS, _jit, _jit_inline
 from .maps import _dexp3_coefficient, _mat_act, _mat_dinv, _mat_phi, _mm, _so3_coef
 from .so4 import _so4_dinv, _so4_omega, _so4_rotate, _so4_sq, _so4_state, _so4_update
 
 
 # ====================================================================================== the model
-@_jit
+@_jit_inline
 def _field(x, Gam, has_gamma, fidx, fval, z, out):
     """out = f(x, Gam): the probed polynomial (COO, see :class:`~.compiled.CompilePlan`); z scratch."""
     k = x.shape[0]
@@ -205,7 +205,7 @@ def _omega_matrix(skew, x, widx, wval, Om):
                 Om[j, i] = -Om[i, j]
 
 
-@_jit
+@_jit_inline
 def _so3_omega(skew, x, widx, wval, Om, out):
     """out = (X21, X02, X10) of Omega(x), straight from the upper triangle of the probed map (rows (a, r, c),
     r < c): X01 = -X10, X02, X12 = -X21 (no matrix: Om is not used)."""
@@ -363,7 +363,7 @@ def _g_low_rank(Gm, Q, F, ra, PQ, PQ2, Om, add_g):
 
 
 # ====================================================================================== h dphi^{-1}
-@_jit
+@_jit_inline
 def _so3_dinv(chart, Th, Om, h, out):
     t0, t1, t2_ = Th[0], Th[1], Th[2]
     a0, a1, a2 = Om[0], Om[1], Om[2]

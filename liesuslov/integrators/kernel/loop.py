@@ -48,6 +48,7 @@ from .common import (
     _combine,
     _initial_step,
     _jit,
+    _jit_inline,
     _probe_step,
     _reject_factor,
     _scale,
@@ -62,7 +63,7 @@ def _ulp(t, direction):
     return abs(np.nextafter(t, direction * np.inf) - t)
 
 
-@_jit
+@_jit_inline
 def _finite(x):
     for i in range(x.shape[0]):
         if not np.isfinite(x[i]):
