@@ -18,14 +18,23 @@ run-time values (one int64 and one float64 parameter array carry the scene), so 
 again. :mod:`.warm` compiles both families in parallel processes (``python -m
 liesuslov.integrators.kernel.warm``; the test session does it first).
 
+Calls that LLVM does not inline pass every array argument field by field, so the small functions of each
+stage are inlined at numba IR level (:func:`~.common._jit_inline`: the polynomial field, the finiteness test,
+the so(3) Omega and dexp⁻¹), and the closed-form kinds' operations take only the arguments they read (the
+family dispatch in :mod:`.group` passes those).
+
+The on-disk cache: numba stamps a cached function with its own file, but a compiled caller embeds its
+callees' code; every function here is stamped with the contents of all the kernel's sources
+(:data:`~.common.KERNEL_SOURCES`: this package, ``control.py`` and ``groups/``), so a change in any of
+them recompiles (:class:`~.common._KernelCache`).
+
 Cost (2-core machine shared with other work, 2026-11-24): the first compiled call on an empty cache
-compiles its family: ~30–40 s for the closed forms, ~60–90 s for the matrix family (one loop for every
-kind was ~65 s); later processes load it from the cache (~1 s). RKMK4 with reconstruction, h = 0.005,
-best of 20 runs (thread CPU time): so(3) ~1.0 µs per step (~7x a plain loop hard-coded for that method:
-the kernel's loops run over run-time sizes — k, stages, layouts — that the plain loop has as constants;
-the loop of one specialisation for every kind did ~0.8 µs); so(4) ~1.35 µs per step (so4 kind, the
-Klebsh–Tisserand scene of the benchmark; the dense kind ~4.3 µs, the plain loop ~0.3 µs);
-Fedorov–Kozlov SO(256) (low-rank kind) ~0.55 ms per step.
+compiles its family: ~30 s for the closed forms, ~60–90 s for the matrix family; later processes load it
+from the cache (~1 s). RKMK4 with reconstruction, h = 0.005, best of 20 runs (thread CPU time): so(3)
+~0.6 µs per step (~5x a plain loop hard-coded for that method: the kernel's loops run over run-time sizes
+— k, stages, layouts — that the plain loop has as constants); so(4) ~1.0 µs per step (so4 kind, the
+Klebsh–Tisserand scene of the benchmark; the plain loop ~0.3 µs); Fedorov–Kozlov SO(256) (low-rank kind)
+~0.55 ms per step.
 
 What is compiled
 ----------------

@@ -6,10 +6,11 @@ Each operation of the group part (``_omega_alg``, ``_alg_sq``, ``_alg_dinv``, ``
 ``_alg_state``) is a stub that only compiled code calls, with the *family* of the kinds as its first
 argument, a numba literal (the loop is compiled once per family: :func:`.loop._solve_one` takes ``family``
 as a literal, :data:`.common.FAMILIES`), and the kind itself as a run-time value. :func:`_by_kind`
-registers, for each stub, the implementations of a family's two kinds (plain functions with the stub's
-signature, inlined where the stub is called): a family's loop therefore compiles its own group code only —
-the closed-form loop (so3, so4) none of the matrix algorithms. Adding a kind is one implementation per
-operation and one entry in each table at the end of this module.
+registers, for each stub and family, a function with the stub's signature (inlined where the stub is
+called) that branches on the kind and calls the kind's implementation — with every argument for the
+matrix kinds, with only what they read for the closed forms: a family's loop therefore compiles its own
+group code only — the closed-form loop (so3, so4) none of the matrix algorithms. Adding a kind is one
+implementation per operation and one entry in each table at the end of this module.
 """
 
 from __future__ import annotations
