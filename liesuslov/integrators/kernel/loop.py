@@ -733,8 +733,9 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                     st = 1
                     tst = t_ev
             # ---------------------------------------------------- outputs (t_eval, record)
-            if ie < NT:
-                t_lim = tst if st == 1 else t_new
+            t_lim = tst if st == 1 else t_new
+            # called only when an output time falls in the step: the call passes ~35 arrays
+            if ie < NT and direction * (t_eval[ie] - t_lim) <= 0.0:
                 ie = _outputs(family, kind, chart, skew, mode, bi, ie, t_eval, t_lim, t, h, t_new,
                               direction, dense, wts, xi, G, xi1, G1, hL, hK, xit, Tht, Gt, W, vb, Q, nc, r, bufs, PQ,
                               PQ2, xi_out, G_out)

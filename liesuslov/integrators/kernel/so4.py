@@ -23,7 +23,7 @@ from numba.extending import register_jitable
 
 from ...groups import so3 as _g3
 from ...groups import so4 as _g4
-from .common import _jit
+from .common import _jit, _jit_inline
 
 # _so4_exp_coefficients compiles its float branch (numba prunes ``isinstance(a2, float)`` on a float64); the
 # batch branch's _rodrigues_fast is registered so that the name types before the pruning — never run.
@@ -44,7 +44,7 @@ _so4_mat_c = _g4._so4_mat_c
 
 
 # ====================================================================================== the operations of kind 4
-@_jit
+@_jit_inline
 def _so4_omega(skew, x, widx, wval, Om, out):
     """out = (p, q) of Omega(x), straight from the upper triangle of the probed map (rows ``(a, r, c)``,
     r < c), by the formulas of ``_so4_pq_c`` entry by entry: X01, X23 feed p0 and q0, X02, X13 p1 and q1,
@@ -78,7 +78,7 @@ def _so4_sq(kind, Th):
     return 2.0 * acc
 
 
-@_jit
+@_jit_inline
 def _so4_dinv(chart, Th, Om, h, out, bern):
     """out = h dphi^{-1}_{-Th}(Om): exp the truncated series on each factor (the terms of ``bern``, rows
     ``(k, B_k/k!)`` for k >= 1), Cayley exact."""
