@@ -341,3 +341,17 @@ def test_valid_custom_tableau_and_copies():
     A[1, 0] = 7.0  # the tableau holds a copy
     assert t.A[1, 0] == 1.0 and t.error_exponent == -1 / 2
     assert "heun" in repr(t) and "order=2" in repr(t)
+
+
+@pytest.mark.parametrize("name", ["DOP853", "RK4"])
+def test_plan_for_is_built_once_and_immutable(name):
+    """integrate() shares one stage plan per method across calls: it must equal a fresh plan and be read-only."""
+    from liesuslov.integrators.plan import plan_for
+
+    plan = plan_for(name)
+    assert plan_for(name) is plan
+    fresh = make_plan(tb.get_tableau(name))
+    for field in ("A", "c", "b", "err", "dense"):
+        np.testing.assert_array_equal(getattr(plan, field), getattr(fresh, field))
+        with pytest.raises(ValueError, match="read-only"):
+            getattr(plan, field)[0] = 1.0
