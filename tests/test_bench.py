@@ -205,3 +205,20 @@ def test_batch_floor_agrees_with_the_library():
     kw = {} if BACKEND is None else {"backend": BACKEND}
     row = targets.measure_batch(20, 10, 1, kw)
     assert row["status"] == "ok" and row["agreement"] <= 1e-12, row
+
+
+def test_timed_together_alternates_the_calls_and_keeps_each_minimum():
+    from liesuslov.bench.timing import timed_together
+
+    calls: list[str] = []
+
+    def make(name, value):
+        def fn():
+            calls.append(name)
+            return value
+        return fn
+    (ra, ta), (rb, tb) = timed_together((make("a", 1), make("b", 2)), 3)[0]
+    count = (len(calls) - 2) // 2
+    # one warm-up call each, then rounds a, b, a, b, ...: a slow spell of the machine hits both sides
+    assert calls == ["a", "b"] + ["a", "b"] * count and count == 3
+    assert (ra, rb) == (1, 2) and 0.0 <= ta < math.inf and 0.0 <= tb < math.inf

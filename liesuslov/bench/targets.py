@@ -29,7 +29,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .scenes import FLOOR_H, FLOOR_SCENES, floor_free_body, floor_klebsh_tisserand, hat3
-from .timing import affordable_steps, child_env, timed
+from .timing import affordable_steps, child_env, timed_together
 
 #: The floor and the library must agree to this (largest absolute difference of the state and of g).
 AGREEMENT_TOL = 1e-12
@@ -70,6 +70,13 @@ def _agreement(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray
     return max(float(np.max(np.abs(a[0] - b[0]))), float(np.max(np.abs(a[1] - b[1]))))
 
 
+def _single_row(n: int, sc, sol, wall: float, steps: int, count: int) -> dict:
+    """The library's half of a target (a) row."""
+    return {"target": "a", "n": n, "scene": sc.title, "steps": steps, "lib_us_per_step": wall / steps * 1e6,
+            "repeats": count, "backend": sol.stats.get("backend", "numpy"),
+            "status": "ok" if sol.success else "failed", "message": "" if sol.success else sol.message}
+
+
 def measure_single(n: int, steps: int, repeats: int, extra_kw: dict) -> dict:
     """Target (a): one trajectory of ``steps`` RKMK4 steps, library against floor (time per step, agreement)."""
     import liesuslov as ls
@@ -80,16 +87,16 @@ def measure_single(n: int, steps: int, repeats: int, extra_kw: dict) -> dict:
         return ls.integrate(sc.system, sc.Omega0, (0.0, k * FLOOR_H), Gamma0=sc.Gamma0, reconstruct=True,
                             method="rkmk4", h=FLOOR_H, t_eval=[k * FLOOR_H], **extra_kw)
     steps = affordable_steps(run, steps, MEASURE_BUDGET_S)
-    sol, wall, count = timed(lambda: run(steps), repeats)
-    row = {"target": "a", "n": n, "scene": sc.title, "steps": steps, "lib_us_per_step": wall / steps * 1e6,
-           "repeats": count, "backend": sol.stats.get("backend", "numpy"),
-           "status": "ok" if sol.success else "failed", "message": "" if sol.success else sol.message}
     if not have_floor():
-        return {**row, "floor_status": "numba is not installed"}
+        ((sol, wall),), count = timed_together((lambda: run(steps),), repeats)
+        return {**_single_row(n, sc, sol, wall, steps, count), "floor_status": "numba is not installed"}
+    fsteps = max(steps, _FLOOR_MIN_STEPS)
+    # library and floor in alternating rounds, so that a slow spell of the machine hits both
+    ((sol, wall), (_, fwall)), count = timed_together(
+        (lambda: run(steps), lambda: _floor_run(n, sc.x0, sc.coeffs, sc.Gamma0, fsteps)), max(repeats, 5))
+    row = _single_row(n, sc, sol, wall, steps, count)
     lib_state = (sc.vector(sol.Omega[-1]), sol.g[-1])
     same = _agreement(lib_state, _floor_run(n, sc.x0, sc.coeffs, sc.Gamma0, steps))
-    fsteps = max(steps, _FLOOR_MIN_STEPS)
-    _, fwall, _ = timed(lambda: _floor_run(n, sc.x0, sc.coeffs, sc.Gamma0, fsteps), max(repeats, 5))
     floor_us = fwall / fsteps * 1e6
     return {**row, "floor_us_per_step": floor_us, "ratio": row["lib_us_per_step"] / floor_us, "agreement": same,
             "agrees": bool(same <= AGREEMENT_TOL), "floor_status": "ok"}
@@ -112,20 +119,23 @@ def measure_batch(batch: int, steps: int, repeats: int, extra_kw: dict) -> dict:
         return ls.integrate(sc.system, hat3(W0), (0.0, k * FLOOR_H), reconstruct=True, method="rkmk4", h=FLOOR_H,
                             t_eval=[k * FLOOR_H], **extra_kw)
     steps = affordable_steps(run, steps, MEASURE_BUDGET_S)
-    sol, wall, count = timed(lambda: run(steps), repeats)
     ts = batch * steps
-    row = {"target": "b", "n": 3, "batch": batch, "steps": steps, "lib_ns_per_traj_step": wall / ts * 1e9,
-           "repeats": count, "backend": sol.stats.get("backend", "numpy"),
-           "status": "ok" if sol.success else "failed", "message": "" if sol.success else sol.message}
+
+    def batch_row(sol, wall, count):
+        return {"target": "b", "n": 3, "batch": batch, "steps": steps, "lib_ns_per_traj_step": wall / ts * 1e9,
+                "repeats": count, "backend": sol.stats.get("backend", "numpy"),
+                "status": "ok" if sol.success else "failed", "message": "" if sol.success else sol.message}
     if not have_floor():
-        return {**row, "floor_status": "numba is not installed"}
+        ((sol, wall),), count = timed_together((lambda: run(steps),), repeats)
+        return {**batch_row(sol, wall, count), "floor_status": "numba is not installed"}
     from . import floor
 
     def floor_batch():
         W, G = W0.copy(), np.broadcast_to(np.eye(3), (batch, 3, 3)).copy()
         floor.free3_batch(W, G, sc.coeffs, FLOOR_H, steps)
         return W, G
-    (W, G), fwall, _ = timed(floor_batch, max(repeats, 3))
+    ((sol, wall), ((W, G), fwall)), count = timed_together((lambda: run(steps), floor_batch), max(repeats, 3))
+    row = batch_row(sol, wall, count)
     same = _agreement((sc.vector(sol.Omega[-1]), sol.g[-1]), (W, G))
     floor_ns = fwall / ts * 1e9
     return {**row, "floor_ns_per_traj_step": floor_ns, "ratio": row["lib_ns_per_traj_step"] / floor_ns,

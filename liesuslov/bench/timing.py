@@ -22,8 +22,21 @@ from .config import REPEAT_BUDGET_S
 
 def timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, float, int]:
     """Warm up once, then time up to ``repeats`` calls; returns (warm-up result, min time, timed calls)."""
-    result = fn()
-    best, count, total = math.inf, 0, 0.0
+    ((result, best),), count = timed_together((fn,), repeats)
+    return result, best, count
+
+
+def timed_together(fns: tuple[Callable[[], Any], ...], repeats: int) -> tuple[list[tuple[Any, float]], int]:
+    """Warm up each of ``fns`` once, then time up to ``repeats`` rounds, each round calling every function once
+    in turn; returns ([(warm-up result, min time) per function], rounds).
+
+    Interleaved rounds make a ratio of two timings fair on a shared machine: a slow spell (another job, a
+    frequency change) lasting seconds hits both sides of the ratio, where timing one side after the other
+    puts it in one of them (we saw the same code at 0.33 and 0.63 µs a step a minute apart).
+    """
+    results = [fn() for fn in fns]
+    best = [math.inf] * len(fns)
+    count, total = 0, 0.0
     enabled = gc.isenabled()
     # As timeit: one collection before, none during the repeats. (A gc.collect() before every call
     # walks every live object and leaves the CPU caches cold: ~0.4 ms added to each call of either
@@ -31,15 +44,17 @@ def timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, float, int]:
     gc.collect()
     gc.disable()
     try:
-        while count < repeats and (count == 0 or total < REPEAT_BUDGET_S):
-            start = time.perf_counter()
-            fn()
-            dt = time.perf_counter() - start
-            best, total, count = min(best, dt), total + dt, count + 1
+        while count < repeats and (count == 0 or total < REPEAT_BUDGET_S * len(fns)):
+            for i, fn in enumerate(fns):
+                start = time.perf_counter()
+                fn()
+                dt = time.perf_counter() - start
+                best[i], total = min(best[i], dt), total + dt
+            count += 1
     finally:
         if enabled:
             gc.enable()
-    return result, best, count
+    return list(zip(results, best, strict=True)), count
 
 
 def affordable_steps(run: Callable[[int], Any], wanted: int, budget_s: float, minimum: int = 2) -> int:
