@@ -39,7 +39,8 @@ def as_float_array(x: Any, name: str, *, ndim_min: int = 0, tail: tuple[int, ...
     if x is None:  # np.asarray(None, dtype=float) would be a silent NaN
         raise TypeError(f"{name} must be a real numeric array, got None")
     # float(complex) would drop the imaginary part with only a warning: a complex value is a wrong type
-    if np.iscomplexobj(x) or (isinstance(x, (list, tuple)) and _has_complex(x)):
+    real_array = isinstance(x, np.ndarray) and x.dtype.kind in "biuf"  # the common case, checked cheaply
+    if not real_array and (np.iscomplexobj(x) or (isinstance(x, (list, tuple)) and _has_complex(x))):
         raise TypeError(f"{name} must be real, got complex values; pass the real part explicitly "
                         f"(np.real({name})) if the imaginary part is rounding noise")
     try:
@@ -149,10 +150,10 @@ def check_t_eval(t_eval, t0: float, t1: float) -> np.ndarray:
     te = as_float_array(t_eval, "t_eval")
     if te.ndim != 1 or te.size == 0:
         raise ValueError(f"t_eval must be a non-empty 1-D array, got shape {te.shape}")
-    lo, hi = min(t0, t1), max(t0, t1)
-    if te.min() < lo or te.max() > hi:
-        raise ValueError(f"t_eval must lie within t_span = ({t0}, {t1})")
-    d = np.diff(te) * (1.0 if t1 > t0 else -1.0)
-    if np.any(d <= 0):
+    if te.size > 1 and ((np.diff(te) * (1.0 if t1 > t0 else -1.0)) <= 0).any():
         raise ValueError("t_eval must be strictly increasing (decreasing for backward integration)")
+    # monotone: its extremes are its ends
+    first, last = float(te[0]), float(te[-1])
+    if min(first, last) < min(t0, t1) or max(first, last) > max(t0, t1):
+        raise ValueError(f"t_eval must lie within t_span = ({t0}, {t1})")
     return np.ascontiguousarray(te)

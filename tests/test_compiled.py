@@ -69,3 +69,12 @@ def test_importing_liesuslov_does_not_import_numba():
     code = ("import sys, liesuslov, liesuslov.integrators, liesuslov.integrators.compiled as c; "
             "c.numba_available(); assert 'numba' not in sys.modules, 'numba imported'")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_compile_plan_is_built_once_per_model_and_use():
+    model = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])), constraints="none").model()
+    first = compiled.compile_plan(model, "g", "exp")
+    assert compiled.compile_plan(model, "g", "exp") is first  # the kernel's packed constants are keyed by it
+    assert compiled.compile_plan(model, "g", "cayley") is not first
+    assert compiled.compile_plan(model, "none", None) is not first
+    assert compiled.compile_plan(model, "g", "exp", omega=False).omega_value.size == 0

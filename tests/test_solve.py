@@ -109,6 +109,22 @@ def test_t_eval_does_not_change_the_steps(backend):
     assert np.max(np.abs(many.g - g_ref)) < 1e-5
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_output_times_on_step_ends_cost_no_extension(backend):
+    # rkmk8 (fixed step) has extra stages for its extension; an output time that is a step's end is that
+    # step's own state, so t_eval on the step grid costs the evaluations of the bare run, and gives its states
+    system, Omega0, Gamma0 = kt_body()
+    kw = dict(Gamma0=Gamma0, reconstruct=True, method="rkmk8", h=0.25, backend=backend)
+    bare = ls.integrate(system, Omega0, (0.0, 2.0), **kw)  # records every step
+    on_grid = ls.integrate(system, Omega0, (0.0, 2.0), t_eval=bare.t, **kw)
+    at_end = ls.integrate(system, Omega0, (0.0, 2.0), t_eval=[2.0], **kw)
+    assert on_grid.stats["nfev"] == bare.stats["nfev"] == at_end.stats["nfev"]
+    assert np.array_equal(on_grid.g, bare.g) and np.array_equal(on_grid.omega, bare.omega)
+    # one output time inside a step needs the extension there: more evaluations
+    inside = ls.integrate(system, Omega0, (0.0, 2.0), t_eval=[0.3, 2.0], **kw)
+    assert inside.stats["nfev"] > bare.stats["nfev"]
+
+
 @pytest.mark.parametrize("method,order", [("rkmk4", 4), ("rkmk5", 5), ("rkmk8", 7)])
 def test_dense_output_order_and_structure(method, order):
     """Interpolated states between the steps converge like h^min(p, p*+1), on the group to rounding."""

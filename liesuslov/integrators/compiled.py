@@ -137,6 +137,14 @@ def compile_plan(model, mode: str, chart: str | None, *, skew: bool | None = Non
         raise NotCompilable(f"the potential {pot!r} (kind {kind!r}) is not a built-in polynomial potential "
                             "(zero, linear, quadratic): its field is not compiled")
     cache = _model_cache(model)
+    key = ("plan", mode, chart if mode != "none" else None, skew, omega)
+    if key not in cache:  # one CompilePlan per model and use: the kernel's packed constants are keyed by it
+        cache[key] = _compile_plan(model, cache, mode, skew, omega)
+    return cache[key]
+
+
+def _compile_plan(model, cache: dict, mode: str, skew: bool | None, omega: bool) -> CompilePlan:
+    """The CompilePlan of :func:`compile_plan` (whose checks passed), from the model's probed coefficients."""
     field_index, field_value = _cached(cache, "field", _probe_field, model)
     n = 0
     omega_index, omega_value = np.zeros((0, 3), np.int64), np.zeros(0)

@@ -77,9 +77,10 @@ class _Output:
         self.steps_xi.append(np.array(xi, dtype=float).reshape(-1))
         self.steps_G.append(np.zeros(0) if G is None else np.array(G, dtype=float).reshape(-1))
 
-    def end(self, t_new: np.ndarray) -> np.ndarray:
-        """For each step end, one past the last t_eval index in the step's interval (t, t_new]."""
-        return np.searchsorted(self.key, self.P.direction * t_new, side="right")
+    def end(self, t_new: np.ndarray, closed: bool = True) -> np.ndarray:
+        """For each step end, one past the last t_eval index in the step's interval (t, t_new] (``closed``)
+        or (t, t_new) (the output times the continuous extension serves: the end is the step's own)."""
+        return np.searchsorted(self.key, self.P.direction * t_new, side="right" if closed else "left")
 
     def arrays(self):
         """``(t, xi (M, B, k), G (M, B, q))`` for the :class:`~.problem.RawResult`."""
@@ -380,18 +381,20 @@ class _Solve:
         t_new = np.where(hit, P.t1, t + h)
         xi1 = step.xi1[sel]
         G1 = None if step.G1 is None else step.G1[sel]
-        # the output times inside (t, t_new] and the events crossed: both need the continuous extension
+        # the output times in (t, t_new]; those inside (t, t_new) and the events crossed need the continuous
+        # extension (an output time at t_new is the step's end itself)
         n_out = None
         if not out.rec_all:
             end = out.end(t_new)
             n_out = end - self.next_out[sel]
-        need = None if n_out is None else n_out > 0
+        need = None if n_out is None else out.end(t_new, closed=False) > self.next_out[sel]
         if ev.E:
             ev_new = ev.values(t_new, xi1, G1, self.idx[sel])
             crossed = ev.crossings(self.ev_old[sel], ev_new, self.at_start[sel])
             hits = crossed.any(axis=1)
             need = hits if need is None else need | hits
-        rows = np.arange(self.live.size)[sel] if (need is not None and need.any()) or ev.E else None
+        some_out = n_out is not None and n_out.any()
+        rows = np.arange(self.live.size)[sel] if (need is not None and need.any()) or ev.E or some_out else None
         sub, pos = None, None  # working-set index of each accepted row (where needed); the extension
         if need is not None and need.any():
             ext = np.flatnonzero(need)  # positions among the accepted rows
@@ -410,7 +413,7 @@ class _Solve:
                                          t_new[r], ev_old[r], ev_new[r], xi1[r:r + 1],
                                          None if G1 is None else G1[r:r + 1])
         # output: every (trajectory, t_eval index) pair of these steps at once
-        if sub is not None and n_out is not None and n_out.any():
+        if some_out:
             self._write(rows, n_out, t, h, t_new, xi1, G1, sub, pos, stop_t)
         if n_out is not None:
             self.next_out[sel] = end
@@ -454,7 +457,7 @@ class _Solve:
         if reached.any():
             self._end(np.arange(self.live.size)[sel][reached], STATUS_REACHED, 0, P.t1)
 
-    def _write(self, rows, n_out, t, h, t_new, xi1, G1, sub: Step, pos, stop_t) -> None:
+    def _write(self, rows, n_out, t, h, t_new, xi1, G1, sub: Step | None, pos, stop_t) -> None:
         """Output at the t_eval indices of the accepted steps: the step's end where it is an output time,
         the continuous extension inside — every (trajectory, index) pair at once."""
         P, out = self.P, self.out

@@ -3,6 +3,7 @@ batch over threads."""
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 
@@ -698,8 +699,9 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                 if E > 0:
                     _event_values(bi, ev_coef, ev_off, xi1, G1, gnew)
                     n_act = _crossings(gold, gnew, at_start, ev_dir, act_e)
-                if n_act > 0 or (ie < NT and direction * (t_eval[ie] - t_new) <= 0.0):
-                    # the continuous extension: stage s (a copy for FSAL methods) and the extra stages
+                if n_act > 0 or (ie < NT and direction * (t_eval[ie] - t_new) < 0.0):
+                    # an output time inside the step (one at t_new is the step's end itself) or a crossing:
+                    # the continuous extension, stage s (a copy for FSAL methods) and the extra stages
                     extended = True
                     i = s
                     if fsal:
@@ -780,13 +782,19 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
     return t_rec[:rec_n].copy(), xi_rec[:rec_n].copy(), G_rec[:rec_n].copy()
 
 
+@functools.cache
+def _cpu_count() -> int:
+    """The machine's cores (``os.cpu_count`` reads /sys on every call: ~15 µs)."""
+    return os.cpu_count() or 1
+
+
 def _solve_batch(solve_one, *args) -> None:
     """Every trajectory of the batch, in contiguous chunks over the cores: ``solve_one(lo, hi, *args)`` (the
     compiled :func:`_solve_one` of the problem's kind) releases the GIL, so threads run the chunks in parallel
     (no parfor to compile; no reduction across trajectories, so a trajectory's numbers do not depend on the
     chunking)."""
     B = args[2].shape[0]
-    workers = min(B, numba.config.NUMBA_NUM_THREADS, os.cpu_count() or 1)
+    workers = 1 if B == 1 else min(B, numba.config.NUMBA_NUM_THREADS, _cpu_count())
     if workers <= 1:
         solve_one(0, B, *args)
         return

@@ -12,10 +12,12 @@ from ... import groups
 from ..compiled import (
     CompilePlan,
     NotCompilable,
+    _model_cache,
     compile_plan,
 )
 from ..problem import RENORM_EVERY, Problem, RawResult
 from .common import (
+    _FHEAD,
     _I_NEV,
     _NHEAD,
     CHARTS,
@@ -100,6 +102,23 @@ def _bernoulli_pairs(order: int) -> np.ndarray:
     return pairs
 
 
+def _constants(problem: Problem, cplan: CompilePlan) -> tuple[np.ndarray, np.ndarray, int]:
+    """(integer, float constants, dexp⁻¹ terms) of the method and the model, packed once per pair: the
+    coefficient lists of the field and Omega, the tableau's rows, the dexp⁻¹ series (read-only)."""
+    plan = problem.plan
+    cache = _model_cache(problem.model)
+    key = ("packed", plan.name, id(cplan))  # cplan lives in the same cache: its id is not reused meanwhile
+    if key not in cache:
+        bern = _bernoulli_pairs(int(plan.order))
+        ints = np.concatenate([cplan.field_index.ravel(), cplan.omega_index.ravel()]).astype(np.int64)
+        floats = np.concatenate([plan.A.ravel(), plan.b.ravel(), plan.err.ravel(), plan.dense.ravel(),
+                                 bern.ravel(), cplan.field_value, cplan.omega_value]).astype(float)
+        ints.setflags(write=False)
+        floats.setflags(write=False)
+        cache[key] = (ints, floats, bern.shape[0])
+    return cache[key]
+
+
 def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool):
     plan = problem.plan
     mode = MODES[problem.mode]
@@ -107,22 +126,24 @@ def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool):
     S, s = plan.S, plan.s
     r = S + 1 if kind == "lowrank" else 0
     a = {None: 0, "so3": 3, "so4": 6, "dense": m * m, "lowrank": r * r}[kind]
-    bern = _bernoulli_pairs(int(plan.order))
+    ints, floats, nb = _constants(problem, cplan)
     E = 0 if problem.event_coef is None else int(problem.event_coef.shape[1])
-    head = np.zeros(_NHEAD, dtype=np.int64)
-    head[:] = (k, m, q, mode, CHARTS[problem.chart if mode else None], KINDS[kind], int(problem.skew),
-               int(bool(cplan.has_gamma) and mode != 0), s, S, plan.err.shape[0], plan.dense.shape[1],
-               int(plan.fsal), int(plan.new_in_step), int(problem.adaptive), int(problem.max_steps),
-               int(problem.reproject), max(RENORM_EVERY, m), bern.shape[0], cplan.field_value.size,
-               cplan.omega_value.size, E, int(plan.order), int(record), r, a)
-    term = np.zeros(E, np.int64) if E == 0 else np.asarray(problem.event_terminal, np.int64).reshape(E)
-    dirn = np.zeros(E, np.int64) if E == 0 else np.asarray(problem.event_direction, np.int64).reshape(E)
-    iprm = np.concatenate([head, cplan.field_index.ravel(), cplan.omega_index.ravel(), term, dirn]).astype(np.int64)
-    fhead = np.array([problem.t0, problem.t1, abs(float(problem.h)), problem.rtol, problem.atol,
-                      plan.error_exponent], dtype=float)
-    fprm = np.concatenate([fhead, plan.A.ravel(), plan.b.ravel(), plan.err.ravel(), plan.dense.ravel(),
-                           bern.ravel(), cplan.field_value, cplan.omega_value]).astype(float)
-    return np.ascontiguousarray(iprm), np.ascontiguousarray(fprm)
+    head = (k, m, q, mode, CHARTS[problem.chart if mode else None], KINDS[kind], int(problem.skew),
+            int(bool(cplan.has_gamma) and mode != 0), s, S, plan.err.shape[0], plan.dense.shape[1],
+            int(plan.fsal), int(plan.new_in_step), int(problem.adaptive), int(problem.max_steps),
+            int(problem.reproject), max(RENORM_EVERY, m), nb, cplan.field_value.size,
+            cplan.omega_value.size, E, int(plan.order), int(record), r, a)
+    iprm = np.empty(_NHEAD + ints.size + 2 * E, np.int64)
+    iprm[:_NHEAD] = head
+    iprm[_NHEAD:_NHEAD + ints.size] = ints
+    if E:
+        iprm[_NHEAD + ints.size:] = np.concatenate([np.asarray(problem.event_terminal).reshape(E),
+                                                     np.asarray(problem.event_direction).reshape(E)])
+    fprm = np.empty(_FHEAD + floats.size)
+    fprm[:_FHEAD] = (problem.t0, problem.t1, abs(float(problem.h)), problem.rtol, problem.atol,
+                     plan.error_exponent)
+    fprm[_FHEAD:] = floats
+    return iprm, fprm
 
 
 _LOOPS: dict = {}
