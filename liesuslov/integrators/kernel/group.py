@@ -27,16 +27,16 @@ from .so4 import _so4_dinv, _so4_omega, _so4_rotate, _so4_sq, _so4_state, _so4_u
 
 # ====================================================================================== the model
 @_jit_inline
-def _field(x, Gam, has_gamma, fidx, fval, z, out):
-    """out = f(x, Gam): the probed polynomial (COO, see :class:`~.compiled.CompilePlan`); z scratch."""
+def _field(x, Gam, has_gamma, fidx, fval, z, out, row):
+    """out[row] = f(x, Gam): the probed polynomial (COO, see :class:`~.compiled.CompilePlan`); z scratch."""
     k = x.shape[0]
     for c in range(k):
         z[c] = x[c]
     if has_gamma:
         for c in range(Gam.shape[0]):
             z[k + c] = Gam[c]
-    for c in range(out.shape[0]):
-        out[c] = 0.0
+    for c in range(out.shape[1]):
+        out[row, c] = 0.0
     for t in range(fval.shape[0]):
         v = fval[t]
         i = fidx[t, 1]
@@ -45,7 +45,7 @@ def _field(x, Gam, has_gamma, fidx, fval, z, out):
             v = v * z[i]
         if j >= 0:
             v = v * z[j]
-        out[fidx[t, 0]] += v
+        out[row, fidx[t, 0]] += v
 
 
 # ====================================================================================== the stubs
@@ -60,8 +60,9 @@ def _alg_sq(family, kind, Th):
     """|Theta|_F^2 / 2 (the squared rotation angle on so(3)): the chart-domain test of exp."""
 
 
-def _alg_dinv(family, kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
-    """out = h dphi^{-1}_{-Th}(Om) in the kind's layout."""
+def _alg_dinv(family, kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
+    """out[row] = h dphi^{-1}_{-Th}(Om) in the kind's layout (a row index, not a row view: a view costs two
+    atomic reference-count updates per stage)."""
 
 
 def _alg_act(family, kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
@@ -97,11 +98,11 @@ def _sq_by(first_kind, first, other):
 
 
 def _dinv_by(first_kind, first, other):
-    def impl(family, kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+    def impl(family, kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
         if kind == first_kind:
-            first(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs)
+            first(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs)
         else:
-            other(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs)
+            other(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs)
     return impl
 
 
@@ -145,11 +146,11 @@ def _omega_closed(so3, so4):
 
 
 def _dinv_closed(so3, so4):
-    def impl(family, kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+    def impl(family, kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
         if kind == 1:
-            so3(chart, Th, Om, h, out)
+            so3(chart, Th, Om, h, out, row)
         else:
-            so4(chart, Th, Om, h, out, bern)
+            so4(chart, Th, Om, h, out, row, bern)
     return impl
 
 
@@ -365,7 +366,7 @@ def _g_low_rank(Gm, Q, F, ra, PQ, PQ2, Om, add_g):
 
 # ====================================================================================== h dphi^{-1}
 @_jit_inline
-def _so3_dinv(chart, Th, Om, h, out):
+def _so3_dinv(chart, Th, Om, h, out, row):
     t0, t1, t2_ = Th[0], Th[1], Th[2]
     a0, a1, a2 = Om[0], Om[1], Om[2]
     tt = t0 * t0 + t1 * t1 + t2_ * t2_
@@ -375,13 +376,13 @@ def _so3_dinv(chart, Th, Om, h, out):
     else:  # exact: a + ½ θ × a + ¼ (θ·a) θ
         cc, aa, bb = 1.0, 0.5, 0.25
     d = bb * (t0 * a0 + t1 * a1 + t2_ * a2)
-    out[0] = h * (cc * a0 + aa * (t1 * a2 - t2_ * a1) + d * t0)
-    out[1] = h * (cc * a1 + aa * (t2_ * a0 - t0 * a2) + d * t1)
-    out[2] = h * (cc * a2 + aa * (t0 * a1 - t1 * a0) + d * t2_)
+    out[row, 0] = h * (cc * a0 + aa * (t1 * a2 - t2_ * a1) + d * t0)
+    out[row, 1] = h * (cc * a1 + aa * (t2_ * a0 - t0 * a2) + d * t1)
+    out[row, 2] = h * (cc * a2 + aa * (t0 * a1 - t1 * a0) + d * t2_)
 
 
 @_jit
-def _dense_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+def _dense_dinv(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
     n = int(math.sqrt(Th.shape[0]) + 0.5)
     W, _ = _scratch(Wf, bufs[1], n)
     Tm = Th.reshape((n, n))
@@ -389,11 +390,11 @@ def _dense_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
     Rm = bufs[2][:n * n].reshape((n, n))
     _mat_dinv(chart, skew, Tm, Am, Rm, W, bern)
     for i in range(n * n):
-        out[i] = h * bufs[2][i]
+        out[row, i] = h * bufs[2][i]
 
 
 @_jit
-def _lowrank_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
+def _lowrank_dinv(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
     ra = nc
     W, _ = _scratch(Wf, bufs[2], ra)
     Tm = _block(Th, r, ra, bufs[0])
@@ -401,10 +402,10 @@ def _lowrank_dinv(kind, chart, skew, Th, Om, h, out, Wf, bern, nc, r, bufs):
     Rm = bufs[2][:ra * ra].reshape((ra, ra))
     _mat_dinv(chart, skew, Tm, Am, Rm, W, bern)
     for i in range(r * r):
-        out[i] = 0.0
+        out[row, i] = 0.0
     for i in range(ra):
         for j in range(ra):
-            out[i * r + j] = h * Rm[i, j]
+            out[row, i * r + j] = h * Rm[i, j]
 
 
 # ====================================================================================== phi(sign Th) v

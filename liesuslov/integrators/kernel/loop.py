@@ -231,7 +231,7 @@ def _first_step(family, kind, skew, mode, has_g, order, direction, rtol, atol, x
         Gt[c] = G[c] + hp * f_y[k + c]
     if has_g:
         _body_vertical(mode, Gt, gam, Gam)
-    _field(xit, Gam, has_g, fidx, fval, z, F[1])
+    _field(xit, Gam, has_g, fidx, fval, z, F, 1)
     if mode != 0:
         _fresh_basis(Q)
         nc = _omega_alg(family, kind, skew, xit, widx, wval, Om, Q, np.int64(1), cvec, Oa)
@@ -559,7 +559,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
         NT = t_eval.shape[0]
         if has_g:
             _body_vertical(mode, G, gam, Gam0)
-        _field(xi, Gam0, has_g, fidx, fval, z, F[0])
+        _field(xi, Gam0, has_g, fidx, fval, z, F, 0)
         nfev += 1
         f0_ok = True
         if not (_finite(F[0]) and _finite(xi) and _finite(G)):
@@ -611,7 +611,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
             if has_g:
                 _body_vertical(mode, G, gam, Gam0)
             if not f0_ok:
-                _field(xi, Gam0, has_g, fidx, fval, z, F[0])
+                _field(xi, Gam0, has_g, fidx, fval, z, F, 0)
                 nfev += 1
                 f0_ok = True
             for c in range(k):
@@ -651,13 +651,13 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                             ok = False
                         if has_g:
                             _alg_act(family, kind, chart, skew, Th, -1.0, Gam0, Gam, W, vb, Q, nc, r, bufs)
-                    _field(Xi, Gam, has_g, fidx, fval, z, F[i])
+                    _field(Xi, Gam, has_g, fidx, fval, z, F, i)
                     nfev += 1
                     for c in range(k):
                         hL[i, c] = h * F[i, c]
                     if mode != 0:
                         nc = _omega_alg(family, kind, skew, Xi, widx, wval, Om, Q, nc, cvec, Oa)
-                        _alg_dinv(family, kind, chart, skew, Th, Oa, h, hK[i], W, bern, nc, r, bufs)
+                        _alg_dinv(family, kind, chart, skew, Th, Oa, h, hK, i, W, bern, nc, r, bufs)
                     i += 1
                 if extended:
                     break

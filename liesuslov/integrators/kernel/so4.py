@@ -79,8 +79,8 @@ def _so4_sq(kind, Th):
 
 
 @_jit_inline
-def _so4_dinv(chart, Th, Om, h, out, bern):
-    """out = h dphi^{-1}_{-Th}(Om): exp the truncated series on each factor (the terms of ``bern``, rows
+def _so4_dinv(chart, Th, Om, h, out, row, bern):
+    """out[row] = h dphi^{-1}_{-Th}(Om): exp the truncated series on each factor (the terms of ``bern``, rows
     ``(k, B_k/k!)`` for k >= 1), Cayley exact."""
     p = (Th[0], Th[1], Th[2])
     q = (Th[3], Th[4], Th[5])
@@ -107,12 +107,12 @@ def _so4_dinv(chart, Th, Om, h, out, bern):
         vals = _so4_dexpinv_c(half, cp, cq, a2, b2, p, q, ap, aq)
     else:
         vals = _so4_dcayinv_c(a2, b2, p, q, ap, aq)
-    out[0] = h * vals[0]
-    out[1] = h * vals[1]
-    out[2] = h * vals[2]
-    out[3] = h * vals[3]
-    out[4] = h * vals[4]
-    out[5] = h * vals[5]
+    out[row, 0] = h * vals[0]
+    out[row, 1] = h * vals[1]
+    out[row, 2] = h * vals[2]
+    out[row, 3] = h * vals[3]
+    out[row, 4] = h * vals[4]
+    out[row, 5] = h * vals[5]
 
 
 @_jit
