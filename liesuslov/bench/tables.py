@@ -250,13 +250,13 @@ less than times on a shared machine. The *floor* is a plain compiled loop (numba
 library runs — RKMK4 in the exponential chart with Rodrigues' formula and the closed-form dexp⁻¹, the
 free rigid body in SO(3) and the Klebsh–Tisserand body in SO(4) (so(4) = so(3) ⊕ so(3) by quaternions),
 h = 0.005, one scalar loop without allocation — checked against the library's result (to 1e-12) in
-every run. Library and floor are timed in alternating rounds (the fastest of each), so that a slow
-spell of the shared machine hits both sides of the ratio. (a) one trajectory: library / floor time per
-step; (b) 10⁴ trajectories: library / floor (single thread) per trajectory-step; (c) the default scene
-of `liesuslov run` with 500 output times: field evaluations / those of the end point only; (d) the
-exponent of the n-sweep on numba; (e) the fastest liesuslov route / scipy DOP853 at equal error; (f)
-`import liesuslov` and the first compiled call (empty numba cache, then loading it), each in a fresh
-process.
+every run. Library and floor are timed in alternating rounds (up to 15, the fastest of each), so that a
+slow spell of the shared machine hits both sides of the ratio. (a) one trajectory: library / floor time
+per step; (b) 10⁴ trajectories: library / floor (single thread) per trajectory-step; (c) the default
+scene of `liesuslov run` with 500 output times: field evaluations / those of the end point only; (d)
+the exponent of the n-sweep on numba; (e) the fastest liesuslov route / scipy DOP853 at equal error;
+(f) `import liesuslov` and the first compiled call (empty numba cache, then loading it), each in a
+fresh process.
 
 **The ratio table and the goal.** For each scene and error level 10⁻⁵ … 10⁻¹⁰, the time of the fastest
 route of each library to reach it (log time interpolated linearly in log error between consecutive points

@@ -35,6 +35,9 @@ from .timing import affordable_steps, child_env, timed_together
 AGREEMENT_TOL = 1e-12
 #: Steps of a floor timing run at least (its per-step cost is ~0.1 µs: shorter runs time the call).
 _FLOOR_MIN_STEPS = 100_000
+#: Timed rounds of library and floor in (a) and (b) (the fastest of each is kept: on this shared machine a
+#: round of 5 still caught slow spells, 0.33 vs 0.43 µs a step for the same code), and their time budget.
+FLOOR_ROUNDS, FLOOR_BUDGET_S = 15, 8.0
 #: Seconds one library call of (a) or (b) may take (fewer steps beyond: the numpy path is ~1000x the floor).
 MEASURE_BUDGET_S = 5.0
 #: Output times of target (c) and its interval.
@@ -93,7 +96,8 @@ def measure_single(n: int, steps: int, repeats: int, extra_kw: dict) -> dict:
     fsteps = max(steps, _FLOOR_MIN_STEPS)
     # library and floor in alternating rounds, so that a slow spell of the machine hits both
     ((sol, wall), (_, fwall)), count = timed_together(
-        (lambda: run(steps), lambda: _floor_run(n, sc.x0, sc.coeffs, sc.Gamma0, fsteps)), max(repeats, 5))
+        (lambda: run(steps), lambda: _floor_run(n, sc.x0, sc.coeffs, sc.Gamma0, fsteps)),
+        max(repeats, FLOOR_ROUNDS), FLOOR_BUDGET_S)
     row = _single_row(n, sc, sol, wall, steps, count)
     lib_state = (sc.vector(sol.Omega[-1]), sol.g[-1])
     same = _agreement(lib_state, _floor_run(n, sc.x0, sc.coeffs, sc.Gamma0, steps))
@@ -134,7 +138,8 @@ def measure_batch(batch: int, steps: int, repeats: int, extra_kw: dict) -> dict:
         W, G = W0.copy(), np.broadcast_to(np.eye(3), (batch, 3, 3)).copy()
         floor.free3_batch(W, G, sc.coeffs, FLOOR_H, steps)
         return W, G
-    ((sol, wall), ((W, G), fwall)), count = timed_together((lambda: run(steps), floor_batch), max(repeats, 3))
+    ((sol, wall), ((W, G), fwall)), count = timed_together((lambda: run(steps), floor_batch),
+                                                           max(repeats, FLOOR_ROUNDS), FLOOR_BUDGET_S)
     row = batch_row(sol, wall, count)
     same = _agreement((sc.vector(sol.Omega[-1]), sol.g[-1]), (W, G))
     floor_ns = fwall / ts * 1e9

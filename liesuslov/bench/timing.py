@@ -26,9 +26,11 @@ def timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, float, int]:
     return result, best, count
 
 
-def timed_together(fns: tuple[Callable[[], Any], ...], repeats: int) -> tuple[list[tuple[Any, float]], int]:
+def timed_together(fns: tuple[Callable[[], Any], ...], repeats: int,
+                   budget_s: float | None = None) -> tuple[list[tuple[Any, float]], int]:
     """Warm up each of ``fns`` once, then time up to ``repeats`` rounds, each round calling every function once
-    in turn; returns ([(warm-up result, min time) per function], rounds).
+    in turn, and no new round once their total passes ``budget_s`` (default ``REPEAT_BUDGET_S`` per function);
+    returns ([(warm-up result, min time) per function], rounds).
 
     Interleaved rounds make a ratio of two timings fair on a shared machine: a slow spell (another job, a
     frequency change) lasting seconds hits both sides of the ratio, where timing one side after the other
@@ -44,7 +46,8 @@ def timed_together(fns: tuple[Callable[[], Any], ...], repeats: int) -> tuple[li
     gc.collect()
     gc.disable()
     try:
-        while count < repeats and (count == 0 or total < REPEAT_BUDGET_S * len(fns)):
+        budget = REPEAT_BUDGET_S * len(fns) if budget_s is None else budget_s
+        while count < repeats and (count == 0 or total < budget):
             for i, fn in enumerate(fns):
                 start = time.perf_counter()
                 fn()
