@@ -33,6 +33,12 @@ def _so4_pq_c(X: np.ndarray) -> tuple[tuple, tuple]:
     else:
         x01, x02, x03 = X[..., 0, 1], X[..., 0, 2], X[..., 0, 3]
         x12, x13, x23 = X[..., 1, 2], X[..., 1, 3], X[..., 2, 3]
+    return _so4_pq_entries(x01, x02, x03, x12, x13, x23)
+
+
+def _so4_pq_entries(x01, x02, x03, x12, x13, x23) -> tuple[tuple, tuple]:
+    """``p``, ``q`` from the upper triangle ``X01, X02, X03, X12, X13, X23`` of a skew 4×4 matrix (floats or
+    arrays): ``p = ½ (X01 + X23, X02 − X13, X03 + X12)``, ``q = ½ (X01 − X23, X02 + X13, X03 − X12)``."""
     return ((0.5 * (x01 + x23), 0.5 * (x02 - x13), 0.5 * (x03 + x12)),
             (0.5 * (x01 - x23), 0.5 * (x02 + x13), 0.5 * (x03 - x12)))
 

@@ -7,14 +7,14 @@ does not import numba): jitted code calls the original function objects, and gro
 other compile through the same registration. Two do not compile — :func:`~liesuslov.groups.so4._so4_pq_c`
 reads numpy arrays by ``X.size`` / ``X.item`` with a batch branch, and
 :func:`~liesuslov.groups.dexp._dexpinv_so3_poly` walks a tuple with ``reversed`` (its coefficients come
-from the cached, rational :func:`~liesuslov.groups.dexp._dexpinv_so3_series`): :func:`_so4_omega` (entry by
-entry) and the loop in :func:`_so4_dinv` are their scalar branches.
+from the cached, rational :func:`~liesuslov.groups.dexp._dexpinv_so3_series`): :func:`_so4_omega` (through
+``_so4_pq_entries``) and the loop in :func:`_so4_dinv` are their scalar branches.
 
 The operations (:func:`_so4_omega`, :func:`_so4_sq`, :func:`_so4_dinv`, :func:`_so4_rotate`, :func:`_so4_update`,
 :func:`_so4_state`) implement the group part's operations of :mod:`.group` (``_omega_alg``, ``_alg_sq``,
 ``_alg_dinv``, ``_alg_act``, ``_alg_update``, ``_alg_state``) for kind 4, with only the arguments they read
-(the closed-form family's dispatch in :mod:`.group` passes those): every value is a local scalar, and Om's
-upper triangle is the only array written besides ``out``.
+(the closed-form family's dispatch in :mod:`.group` passes those): every value is a local scalar, and
+``out`` is the only array written.
 """
 
 from __future__ import annotations
@@ -27,9 +27,9 @@ from .common import _jit, _jit_inline
 
 # _so4_exp_coefficients compiles its float branch (numba prunes ``isinstance(a2, float)`` on a float64); the
 # batch branch's _rodrigues_fast is registered so that the name types before the pruning — never run.
-for _fn in (_g3._sq, _g3._so3_lin_c, _g3._rodrigues_fast, _g4._so4_pv_c, _g4._so4_qv_c, _g4._cos_sinc,
-            _g4._so4_exp_coefficients, _g4._so4_exp_apply_c, _g4._so4_cayley_coefficients, _g4._so4_lin_apply_c,
-            _g4._so4_mat_c, _g4._so4_exp_mat_c, _g4._so4_dexpinv_c, _g4._so4_dcayinv_c):
+for _fn in (_g3._sq, _g3._so3_lin_c, _g3._rodrigues_fast, _g4._so4_pq_entries, _g4._so4_pv_c, _g4._so4_qv_c,
+            _g4._cos_sinc, _g4._so4_exp_coefficients, _g4._so4_exp_apply_c, _g4._so4_cayley_coefficients,
+            _g4._so4_lin_apply_c, _g4._so4_mat_c, _g4._so4_exp_mat_c, _g4._so4_dexpinv_c, _g4._so4_dcayinv_c):
     register_jitable(_fn)
 del _fn
 
@@ -41,32 +41,39 @@ _so4_exp_coefficients = _g4._so4_exp_coefficients
 _so4_exp_mat_c = _g4._so4_exp_mat_c
 _so4_lin_apply_c = _g4._so4_lin_apply_c
 _so4_mat_c = _g4._so4_mat_c
+_so4_pq_entries = _g4._so4_pq_entries
 
 
 # ====================================================================================== the operations of kind 4
 @_jit_inline
 def _so4_omega(skew, x, widx, wval, Om, out):
-    """out = (p, q) of Omega(x), straight from the upper triangle of the probed map (rows ``(a, r, c)``,
-    r < c), by the formulas of ``_so4_pq_c`` entry by entry: X01, X23 feed p0 and q0, X02, X13 p1 and q1,
-    X03, X12 p2 and q2 (halved; the signs of X13 in p, of X23 and X12 in q are minus). Om is not used."""
-    for i in range(6):
-        out[i] = 0.0
+    """out = (p, q) of Omega(x): the upper triangle of the probed map (rows ``(a, r, c)``, r < c) summed into
+    six scalars, then the shared formula :func:`~liesuslov.groups.so4._so4_pq_entries`. Om is not used."""
+    x01 = x02 = x03 = x12 = x13 = x23 = 0.0
     for t in range(wval.shape[0]):
-        v = 0.5 * wval[t] * x[widx[t, 0]]
+        v = wval[t] * x[widx[t, 0]]
         r, c = widx[t, 1], widx[t, 2]
-        if r == 0:  # (0, c): p_{c-1} and q_{c-1}, both +
-            out[c - 1] += v
-            out[c + 2] += v
-        elif c == 3:  # (1, 3): p1 -, q1 +;  (2, 3): p0 +, q0 -
-            if r == 1:
-                out[1] -= v
-                out[4] += v
+        if r == 0:
+            if c == 1:
+                x01 += v
+            elif c == 2:
+                x02 += v
             else:
-                out[0] += v
-                out[3] -= v
-        else:  # (1, 2): p2 +, q2 -
-            out[2] += v
-            out[5] -= v
+                x03 += v
+        elif r == 1:
+            if c == 2:
+                x12 += v
+            else:
+                x13 += v
+        else:
+            x23 += v
+    p, q = _so4_pq_entries(x01, x02, x03, x12, x13, x23)
+    out[0] = p[0]
+    out[1] = p[1]
+    out[2] = p[2]
+    out[3] = q[0]
+    out[4] = q[1]
+    out[5] = q[2]
 
 
 @_jit
