@@ -58,12 +58,22 @@ class _KernelCache(FunctionCache):
                                               source_stamp=_STAMP)
 
 
-def _jit(fn):
+def _jit(fn, entry: bool = False):
     """``fn`` compiled with :data:`_JIT_OPTIONS` and cached on disk under the kernel's stamp (:class:`_KernelCache`);
-    also the scalar formulas of :mod:`control` and :mod:`liesuslov.groups`, compiled as they stand."""
-    dispatcher = njit(**_JIT_OPTIONS)(fn)
+    also the scalar formulas of :mod:`control` and :mod:`liesuslov.groups`, compiled as they stand.
+
+    Only an ``entry`` (:func:`_jit_entry`) can be called from Python: the others get neither the CPython nor
+    the C wrapper, which numba would otherwise generate, optimise and compile for every function (unboxing each
+    of up to 45 array arguments) although only compiled code calls them."""
+    options = _JIT_OPTIONS if entry else {**_JIT_OPTIONS, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}
+    dispatcher = njit(**options)(fn)
     dispatcher._cache = _KernelCache(fn)
     return dispatcher
+
+
+def _jit_entry(fn):
+    """:func:`_jit` for a function Python calls (the loop): with numba's CPython wrapper."""
+    return _jit(fn, entry=True)
 
 
 @overload(control.select, inline="always")

@@ -49,6 +49,7 @@ from .common import (
     _combine,
     _initial_step,
     _jit,
+    _jit_entry,
     _jit_inline,
     _probe_step,
     _reject_factor,
@@ -417,7 +418,7 @@ def _reproject(mode, G, Wg):
             G[c] = G[c] / nr
 
 
-@_jit
+@_jit_entry
 def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap, xi_out, G_out, status, t_stop,
                failure, nfev_o, steps_o, rejected_o, ev_count, ev_t, ev_xi, ev_G):
     """Integrate trajectories ``lo .. hi-1`` one after the other (see the module docstring); returns the
