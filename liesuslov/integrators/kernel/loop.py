@@ -197,6 +197,16 @@ def _error_norm(family, kind, mode, err, s_eval, rtol, atol, xi, xi1, G, G1, hL,
 
 
 @_jit
+def _group_velocity(family, kind, skew, mode, x, G, widx, wval, Om, Q, cvec, Oa, Eg, r, bufs, PQ, PQ2):
+    """Eg = Omega(x) carried to the state G (``g Omega`` or ``Omega Gamma``, :func:`.group._alg_state`): the
+    group part's velocity, up to the sign of mode gamma (one function, so the first step inlines the group code
+    once, not twice)."""
+    _fresh_basis(Q)
+    nc = _omega_alg(family, kind, skew, x, widx, wval, Om, Q, np.int64(1), cvec, Oa)
+    _alg_state(family, kind, mode, G, Oa, Eg, Q, nc, r, bufs, PQ, PQ2)
+
+
+@_jit
 def _first_step(family, kind, skew, mode, has_g, order, direction, rtol, atol, xi, G, gam, F, xit, Gt, Gam, z, fidx,
                 fval, widx, wval, Om, Q, cvec, Oa, Eg, r, bufs, PQ, PQ2, sc_y, f_y):
     """Hairer's starting step (as scipy's) on the embedded state y = (xi, G), f = (xi_dot, group velocity);
@@ -205,9 +215,7 @@ def _first_step(family, kind, skew, mode, has_g, order, direction, rtol, atol, x
     q = G.shape[0]
     N = k + q
     if mode != 0:
-        _fresh_basis(Q)
-        nc = _omega_alg(family, kind, skew, xi, widx, wval, Om, Q, np.int64(1), cvec, Oa)
-        _alg_state(family, kind, mode, G, Oa, Eg, Q, nc, r, bufs, PQ, PQ2)
+        _group_velocity(family, kind, skew, mode, xi, G, widx, wval, Om, Q, cvec, Oa, Eg, r, bufs, PQ, PQ2)
     for c in range(k):
         sc_y[c] = _scale(xi[c], xi[c], rtol, atol)
         f_y[c] = F[0, c]
@@ -234,9 +242,7 @@ def _first_step(family, kind, skew, mode, has_g, order, direction, rtol, atol, x
         _body_vertical(mode, Gt, gam, Gam)
     _field(xit, Gam, has_g, fidx, fval, z, F, 1)
     if mode != 0:
-        _fresh_basis(Q)
-        nc = _omega_alg(family, kind, skew, xit, widx, wval, Om, Q, np.int64(1), cvec, Oa)
-        _alg_state(family, kind, mode, Gt, Oa, Eg, Q, nc, r, bufs, PQ, PQ2)
+        _group_velocity(family, kind, skew, mode, xit, Gt, widx, wval, Om, Q, cvec, Oa, Eg, r, bufs, PQ, PQ2)
     d2 = 0.0
     for c in range(k):
         d2 += ((F[1, c] - f_y[c]) / sc_y[c]) ** 2
@@ -573,7 +579,8 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                     G_out[ie, bi, c] = G[c]
                 ie += 1
             if record:
-                t_rec, xi_rec, G_rec = _record(t_rec, xi_rec, G_rec, 0, t0, xi, G)
+                # rec_n (0 here), not a literal 0: numba would compile _record a second time for it
+                t_rec, xi_rec, G_rec = _record(t_rec, xi_rec, G_rec, rec_n, t0, xi, G)
                 rec_n = 1
         _event_values(bi, ev_coef, ev_off, xi, G, gold)
         h = hfix * direction
