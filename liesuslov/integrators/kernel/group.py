@@ -48,6 +48,11 @@ def _field(x, Gam, has_gamma, fidx, fval, z, out, row):
         out[row, fidx[t, 0]] += v
 
 
+#: :func:`_field` as a function of its own, for the calls outside the stages (the start of a trajectory, the
+#: first step): each inlined call site adds to the loop's compile time.
+_field_call = _jit(_field.py_func)
+
+
 # ====================================================================================== the stubs
 # Layouts of an algebra element: so3 3 numbers (X21, X02, X10), dense m*m (row major), lowrank r*r (the
 # coordinates in the step's basis Q), so4 6 numbers (p, q); see the package docstring.

@@ -50,12 +50,11 @@ from .common import (
     _initial_step,
     _jit,
     _jit_entry,
-    _jit_inline,
     _probe_step,
     _reject_factor,
     _scale,
 )
-from .group import _alg_act, _alg_dinv, _alg_sq, _alg_state, _alg_update, _field, _omega_alg
+from .group import _alg_act, _alg_dinv, _alg_sq, _alg_state, _alg_update, _field, _field_call, _omega_alg
 from .maps import _PI2, _polar_step
 
 
@@ -65,8 +64,9 @@ def _ulp(t, direction):
     return abs(np.nextafter(t, direction * np.inf) - t)
 
 
-@_jit_inline
+@_jit
 def _finite(x):
+    """Every entry of x is finite (the start of a trajectory; each step folds its test into its own loops)."""
     for i in range(x.shape[0]):
         if not np.isfinite(x[i]):
             return False
@@ -240,7 +240,7 @@ def _first_step(family, kind, skew, mode, has_g, order, direction, rtol, atol, x
         Gt[c] = G[c] + hp * f_y[k + c]
     if has_g:
         _body_vertical(mode, Gt, gam, Gam)
-    _field(xit, Gam, has_g, fidx, fval, z, F, 1)
+    _field_call(xit, Gam, has_g, fidx, fval, z, F, np.int64(1))
     if mode != 0:
         _group_velocity(family, kind, skew, mode, xit, Gt, widx, wval, Om, Q, cvec, Oa, Eg, r, bufs, PQ, PQ2)
     d2 = 0.0
@@ -489,6 +489,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
     direction = 1.0 if t1 > t0 else -1.0
     s_eval = s + (1 if new_in else 0)
     # np.int64(1), not 1: numba compiles a separate specialisation for a literal argument
+    i0 = np.int64(0)
     i1 = np.int64(1)
     exp_domain = chart == 0 and skew  # the exponential's chart: |Theta| < pi is checked
     # scratch (once per call; each trajectory overwrites what it reads)
@@ -566,7 +567,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
         NT = t_eval.shape[0]
         if has_g:
             _body_vertical(mode, G, gam, Gam0)
-        _field(xi, Gam0, has_g, fidx, fval, z, F, 0)
+        _field_call(xi, Gam0, has_g, fidx, fval, z, F, i0)
         nfev += 1
         f0_ok = True
         if not (_finite(F[0]) and _finite(xi) and _finite(G)):
@@ -670,11 +671,14 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                 if extended:
                     break
                 # ------------------------------------------------ the trial step's end and its error
+                # finite: 0 * v is 0 for a finite v, NaN otherwise (the test folded into the loops over the state)
+                chk = 0.0
                 for c in range(k):
                     acc = 0.0
                     for j in range(s):
                         acc += bw[j] * hL[j, c]
                     xi1[c] = xi[c] + acc
+                    chk += 0.0 * xi1[c]
                 if mode != 0:
                     for c in range(a):
                         acc = 0.0
@@ -684,7 +688,9 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                     if exp_domain and _alg_sq(family, kind, Th1) >= _PI2:
                         ok = False
                     _alg_update(family, kind, chart, skew, mode, G, Th1, G1, W, vb, Q, nc, r, bufs, PQ, PQ2)
-                finite = _finite(xi1) and _finite(G1)
+                    for c in range(q):
+                        chk += 0.0 * G1[c]
+                finite = chk == 0.0
                 if adaptive:
                     nrm = _error_norm(family, kind, mode, err, s_eval, rtol, atol, xi, xi1, G, G1, hL, hK, Ea, Eg, Q,
                                       nc, r, bufs, PQ, PQ2)
