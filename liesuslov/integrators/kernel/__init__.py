@@ -19,9 +19,13 @@ again. :mod:`.warm` compiles both families in parallel processes (``python -m
 liesuslov.integrators.kernel.warm``; the test session does it first).
 
 Calls that LLVM does not inline pass every array argument field by field, so the small functions of each
-stage are inlined at numba IR level (:func:`~.common._jit_inline`: the polynomial field, the finiteness test,
-the so(3) Omega and dexp⁻¹), and the closed-form kinds' operations take only the arguments they read (the
-family dispatch in :mod:`.group` passes those).
+stage are inlined at numba IR level (:func:`~.common._jit_inline`: the polynomial field, the so(3) Omega and
+dexp⁻¹), and the closed-form kinds' operations take only the arguments they read (the family dispatch in
+:mod:`.group` passes those). Inlining has a compile-time price that grows faster than the loop: numba's typing
+of the loop took ~10 s more with event location and output inlined into it, so only the stages' calls are
+inlined — the finiteness test of a step is folded into the loops that form its state, the start of a
+trajectory and the rarer jobs are calls, the first step computes the group velocity in one function.
+Only the loop has numba's CPython wrapper (the others are called from compiled code only).
 
 The on-disk cache: numba stamps a cached function with its own file, but a compiled caller embeds its
 callees' code; every function here is stamped with the contents of all the kernel's sources
