@@ -494,3 +494,21 @@ def test_the_cache_is_stamped_with_every_kernel_source(tmp_path):
     before = common.sources_stamp([a, b])
     b.write_text("y = 3\n")  # the second file alone changes
     assert common.sources_stamp([a, b]) != before
+
+
+
+@pytest.mark.slow
+def test_the_first_compilation_prints_no_numba_warning(tmp_path):
+    """The closed-form family's first compilation printed numba's NumbaIRAssumptionWarning ("variable ... is not
+    in scope", asking the user to report it to numba) once per inlined so(4) Omega (six scalars summed in branches).
+    A first call of the so(4) kind, on an empty cache, in a process where numba's warnings are errors."""
+    import os
+    import subprocess
+    import sys
+
+    script = ("import warnings, numba.core.errors as e; warnings.simplefilter('error', e.NumbaWarning); "
+              "from liesuslov.integrators.kernel.warm import run_kind; print(run_kind('so4'))")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=900,
+                         check=False)
+    assert res.returncode == 0 and res.stdout.strip() == "numba", res.stderr[-2000:]

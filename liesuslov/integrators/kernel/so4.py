@@ -48,26 +48,15 @@ _so4_pq_entries = _g4._so4_pq_entries
 @_jit_inline
 def _so4_omega(skew, x, widx, wval, Om, out):
     """out = (p, q) of Omega(x): the upper triangle of the probed map (rows ``(a, r, c)``, r < c) summed into
-    six scalars, then the shared formula :func:`~liesuslov.groups.so4._so4_pq_entries`. Om is not used."""
-    x01 = x02 = x03 = x12 = x13 = x23 = 0.0
+    the six entries ``(x01, x02, x03, x12, x13, x23)`` (in ``out`` itself: six scalars summed in branches
+    inside the loop make numba's SSA pass warn once inlined), then the shared formula
+    :func:`~liesuslov.groups.so4._so4_pq_entries`. Om is not used."""
+    for i in range(6):
+        out[i] = 0.0
     for t in range(wval.shape[0]):
-        v = wval[t] * x[widx[t, 0]]
         r, c = widx[t, 1], widx[t, 2]
-        if r == 0:
-            if c == 1:
-                x01 += v
-            elif c == 2:
-                x02 += v
-            else:
-                x03 += v
-        elif r == 1:
-            if c == 2:
-                x12 += v
-            else:
-                x13 += v
-        else:
-            x23 += v
-    p, q = _so4_pq_entries(x01, x02, x03, x12, x13, x23)
+        out[(r * (7 - r)) // 2 + c - r - 1] += wval[t] * x[widx[t, 0]]  # (r, c) -> its place in that order
+    p, q = _so4_pq_entries(out[0], out[1], out[2], out[3], out[4], out[5])
     out[0] = p[0]
     out[1] = p[1]
     out[2] = p[2]
