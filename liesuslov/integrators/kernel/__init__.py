@@ -32,13 +32,15 @@ callees' code; every function here is stamped with the contents of all the kerne
 (:data:`~.common.KERNEL_SOURCES`: this package, ``control.py`` and ``groups/``), so a change in any of
 them recompiles (:class:`~.common._KernelCache`).
 
-Cost (2-core machine shared with other work, 2026-11-24): the first compiled call on an empty cache
-compiles its family: ~30 s for the closed forms, ~60–90 s for the matrix family; later processes load it
-from the cache (~1 s). RKMK4 with reconstruction, h = 0.005, best of 20 runs (thread CPU time): so(3)
-~0.33 µs per step (~2.5x a plain loop hard-coded for that method: the kernel's loops run over run-time
-sizes — k, stages, layouts — and read the field and Omega(xi) as coefficient lists, where the plain loop
-has constants); so(4) ~0.65 µs per step (so4 kind, the Klebsh–Tisserand scene of the benchmark; ~2x the
-plain loop's ~0.3 µs); Fedorov–Kozlov SO(256) (low-rank kind) ~0.55 ms per step.
+Cost (2-core machine shared with other work, 2026-11-24): the first compiled call on an empty cache compiles
+its family: ~30 s for the closed forms, ~70–80 s for the matrix family (whose time is mostly LLVM: numba
+optimises each compiled function's module with all its callees linked in, so the matrix maps' deep call chain
+is optimised once per level); later processes load it from the cache (~1 s). RKMK4 with reconstruction,
+h = 0.005, best of 20 runs (thread CPU time): so(3) ~0.33 µs per step (~2.5x a plain loop hard-coded for that
+method: the kernel's loops run over run-time sizes — k, stages, layouts — and read the field and Omega(xi) as
+coefficient lists, where the plain loop has constants); so(4) ~0.65 µs per step (so4 kind, the
+Klebsh–Tisserand scene of the benchmark; ~2x the plain loop's ~0.3 µs); Fedorov–Kozlov SO(256) (low-rank kind)
+~0.55 ms per step.
 
 What is compiled
 ----------------

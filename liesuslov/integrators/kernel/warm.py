@@ -2,10 +2,10 @@
 
 The compiled loop is specialised per family of kinds (:data:`~.common.FAMILIES`: the closed forms so3 and
 so4, and the matrix algorithms dense and lowrank): the first run of a family on a machine compiles it
-(~30–60 s each on a 2-core machine; numba compiles one function at a time, under a lock), later processes
-load it from the cache (< 1 s). :func:`compile_kinds` compiles them in parallel processes — one per core —
-so a cluster node, a container image or a test session pays that once, in the wall time of the slowest
-rather than the sum::
+(~30 s for the closed forms, ~70–80 s for the matrices, on a 2-core machine; numba compiles one function at
+a time, under a lock), later processes load it from the cache (< 1 s). :func:`compile_kinds` compiles them in
+parallel processes — one per core — so a cluster node, a container image or a test session pays that once, in
+the wall time of the slowest rather than the sum::
 
     python -m liesuslov.integrators.kernel.warm            # both families (so3 and dense)
     python -m liesuslov.integrators.kernel.warm so4        # the family of one kind
