@@ -36,11 +36,11 @@ Cost (2-core machine shared with other work, 2026-11-24): the first compiled cal
 its family: ~30 s for the closed forms, ~70–80 s for the matrix family (whose time is mostly LLVM: numba
 optimises each compiled function's module with all its callees linked in, so the matrix maps' deep call chain
 is optimised once per level); later processes load it from the cache (~1 s). RKMK4 with reconstruction,
-h = 0.005, best of 20 runs (thread CPU time): so(3) ~0.33 µs per step (~2.5x a plain loop hard-coded for that
-method: the kernel's loops run over run-time sizes — k, stages, layouts — and read the field and Omega(xi) as
-coefficient lists, where the plain loop has constants); so(4) ~0.65 µs per step (so4 kind, the
-Klebsh–Tisserand scene of the benchmark; ~2x the plain loop's ~0.3 µs); Fedorov–Kozlov SO(256) (low-rank kind)
-~0.55 ms per step.
+h = 0.005, best of 20 runs (thread CPU time): so(3) 0.33–0.34 µs per step (2.5–2.6x a plain loop hard-coded for
+that method: the kernel's loops run over run-time sizes — k, stages, layouts — and read the field and Omega(xi) as
+coefficient lists, where the plain loop has constants); so(4) 0.65–0.72 µs per step (so4 kind, the
+Klebsh–Tisserand scene of the benchmark; 2.1–2.3x the plain loop's ~0.31 µs; benchmarks at acee8a8 and
+4bc8b67); Fedorov–Kozlov SO(256) (low-rank kind) ~0.55 ms per step.
 
 What is compiled
 ----------------
