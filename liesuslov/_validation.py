@@ -123,8 +123,8 @@ def unit_vectors(x: np.ndarray, name: str, *, tol: float = 1e-8) -> np.ndarray:
 
     The division removes the rounding of the given data, so unit vectors stay unit to 1e-16.
     """
-    nrm = np.linalg.norm(x, axis=-1)
-    if x.size and not np.all(np.abs(nrm - 1.0) <= tol):
+    nrm = np.sqrt((x * x).sum(axis=-1))  # np.linalg.norm's own formula on a last axis, without its ~4 µs of checks
+    if x.size and not (np.abs(nrm - 1.0) <= tol).all():
         raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got norms in "
                          f"[{nrm.min():.6g}, {nrm.max():.6g}]: pass {name} / |{name}|")
     return x / nrm[..., None]

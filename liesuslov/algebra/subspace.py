@@ -101,12 +101,15 @@ class Subspace:
 
     # ------------------------------------------------------------------ geometry
     def contains(self, x, tol: float | None = None) -> np.ndarray:
-        """Membership test ``|x - P x| <= tol * max(1, |x|)``, batched: (..., d) -> bool (...)."""
+        """Membership test ``|x - P x| <= tol * max(1, |x|)``, batched: (..., d) -> bool (...).
+
+        Through the basis (O(k d), not the d - k covectors: d - k ~ d^2/2 on so(n) with Fedorov–Kozlov
+        constraints), with squared norms on both sides (the front door tests every Omega0).
+        """
         x = np.asarray(x, dtype=float)
         tol = self.tol * 10 if tol is None else tol
         r = x - (x @ self.basis.T) @ self.basis
-        # squared norms (both sides >= 0): the same test without np.linalg.norm's overhead
-        return (r * r).sum(axis=-1) <= tol * tol * np.maximum(1.0, (x * x).sum(axis=-1))
+        return np.add.reduce(r * r, axis=-1) <= tol * tol * np.maximum(1.0, np.add.reduce(x * x, axis=-1))
 
     def complement(self) -> Subspace:
         """The orthogonal complement for the pairing (the span of the constraint covectors)."""

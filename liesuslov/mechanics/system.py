@@ -324,7 +324,12 @@ class SuslovSystem:
     # ------------------------------------------------------------------ models
     def available_forms(self) -> list[str]:
         """The forms that hold for this scene, most specialised first."""
-        return [f for f in FORMS if self.form_obstruction(f) is None]
+        return list(self._forms)
+
+    @cached_property
+    def _forms(self) -> tuple[str, ...]:
+        # the scene does not change: judged once (model(form="auto") reads it on every integrate call)
+        return tuple(f for f in FORMS if self.form_obstruction(f) is None)
 
     def form_obstruction(self, form: str) -> str | None:
         """Why ``form`` does not hold (a sentence), or None if it does."""
@@ -379,7 +384,7 @@ class SuslovSystem:
                 raise ValueError(f"gamma=False is impossible here: {why}")
             has_gamma = False
         if form == "auto":
-            form = self.available_forms()[0]
+            form = self._forms[0]
         else:
             why = self.form_obstruction(form)
             if why is not None:

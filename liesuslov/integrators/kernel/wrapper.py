@@ -54,27 +54,44 @@ def kind_for(model, mode: str, chart: str | None) -> str | None:
 # ====================================================================================== the wrapper
 def check(problem: Problem) -> None:
     """Raise :class:`NotCompilable` with the reason when ``problem`` cannot run on the compiled kernel."""
-    _prepare(problem)
+    _prepare(problem, _model_cache(problem.model))
 
 
-def _prepare(problem: Problem):
+def _prepare(problem: Problem, cache: dict):
+    """``(kind, CompilePlan)`` of ``problem``, or :class:`NotCompilable` with the reason; the model's part is
+    judged once per (model, mode, chart, kind) and kept in the model's cache (a front-door call is ~0.1 ms)."""
     if njit is None:
         raise NotCompilable("numba is not installed (pip install 'liesuslov[fast]')")
     if problem.events and problem.event_coef is None:
         raise NotCompilable("an event is a user callable (not a LinearEvent): events are located on numpy")
     mode = problem.mode
     kind = problem.kind if mode != "none" else None
+    key = ("prepared", mode, problem.chart, kind, bool(problem.skew), int(problem.m))
+    out = cache.get(key)
+    if out is None:
+        try:
+            out = _judge(problem.model, mode, problem.chart, kind, problem.skew, problem.m)
+        except NotCompilable as exc:
+            out = exc
+        cache[key] = out
+    if isinstance(out, NotCompilable):
+        raise NotCompilable(str(out))
+    return out
+
+
+def _judge(model, mode: str, chart: str | None, kind: str | None, skew: bool, m: int):
+    """``(kind, CompilePlan)`` when the kernel runs ``model`` in this mode, chart and kind; NotCompilable else."""
     if kind not in KINDS:
         raise NotCompilable(f"the compiled kernel knows the kinds {sorted(k for k in KINDS if k)}, got {kind!r}")
-    if mode != "none" and problem.chart not in ("exp", "cayley"):
-        raise NotCompilable(f"the compiled kernel knows the charts exp and cayley, got {problem.chart!r}")
-    if kind in ("so3", "so4", "lowrank") and not problem.skew:
+    if mode != "none" and chart not in ("exp", "cayley"):
+        raise NotCompilable(f"the compiled kernel knows the charts exp and cayley, got {chart!r}")
+    if kind in ("so3", "so4", "lowrank") and not skew:
         raise NotCompilable(f"the {kind!r} kind needs so(n)")
-    if kind in ("so3", "so4") and problem.m != int(kind[2]):
-        raise NotCompilable(f"the {kind!r} kind needs {kind[2]}×{kind[2]} matrices, got m = {problem.m}")
-    cplan = compile_plan(problem.model, mode, problem.chart, skew=problem.skew, omega=kind != "lowrank")
+    if kind in ("so3", "so4") and m != int(kind[2]):
+        raise NotCompilable(f"the {kind!r} kind needs {kind[2]}×{kind[2]} matrices, got m = {m}")
+    cplan = compile_plan(model, mode, chart, skew=skew, omega=kind != "lowrank")
     if kind == "lowrank":
-        _check_fedorov_kozlov(problem.model)
+        _check_fedorov_kozlov(model)
     return kind, cplan
 
 
@@ -102,16 +119,16 @@ def _bernoulli_pairs(order: int) -> np.ndarray:
     return pairs
 
 
-def _constants(problem: Problem, cplan: CompilePlan) -> tuple[np.ndarray, np.ndarray, int]:
+def _constants(problem: Problem, cplan: CompilePlan, cache: dict) -> tuple[np.ndarray, np.ndarray, int]:
     """(integer, float constants, dexp⁻¹ terms) of the method and the model, packed once per pair: the
-    coefficient lists of the field and Omega, the tableau's rows, the dexp⁻¹ series (read-only)."""
+    coefficient lists of the field and Omega, the tableau's rows, the dexp⁻¹ series (read-only); the float
+    constants after :data:`~.common._FHEAD` zeros, the place of the float head."""
     plan = problem.plan
-    cache = _model_cache(problem.model)
     key = ("packed", plan.name, id(cplan))  # cplan lives in the same cache: its id is not reused meanwhile
     if key not in cache:
         bern = _bernoulli_pairs(int(plan.order))
         ints = np.concatenate([cplan.field_index.ravel(), cplan.omega_index.ravel()]).astype(np.int64)
-        floats = np.concatenate([plan.A.ravel(), plan.b.ravel(), plan.err.ravel(), plan.dense.ravel(),
+        floats = np.concatenate([np.zeros(_FHEAD), plan.A.ravel(), plan.b.ravel(), plan.err.ravel(), plan.dense.ravel(),
                                  bern.ravel(), cplan.field_value, cplan.omega_value]).astype(float)
         ints.setflags(write=False)
         floats.setflags(write=False)
@@ -119,30 +136,38 @@ def _constants(problem: Problem, cplan: CompilePlan) -> tuple[np.ndarray, np.nda
     return cache[key]
 
 
-def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool):
+def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool, cache: dict):
+    """``(iprm, fprm)``: the integer head and constants (kept per model and setting when there is no event:
+    the kernel only reads them) and the float head (times, step, tolerances) with the float constants."""
     plan = problem.plan
-    mode = MODES[problem.mode]
-    k, m, q = int(problem.k), int(problem.m), int(problem.q)
-    S, s = plan.S, plan.s
-    r = S + 1 if kind == "lowrank" else 0
-    a = {None: 0, "so3": 3, "so4": 6, "dense": m * m, "lowrank": r * r}[kind]
-    ints, floats, nb = _constants(problem, cplan)
+    ints, floats, nb = _constants(problem, cplan, cache)
     E = 0 if problem.event_coef is None else int(problem.event_coef.shape[1])
-    head = (k, m, q, mode, CHARTS[problem.chart if mode else None], KINDS[kind], int(problem.skew),
-            int(bool(cplan.has_gamma) and mode != 0), s, S, plan.err.shape[0], plan.dense.shape[1],
-            int(plan.fsal), int(plan.new_in_step), int(problem.adaptive), int(problem.max_steps),
-            int(problem.reproject), max(RENORM_EVERY, m), nb, cplan.field_value.size,
-            cplan.omega_value.size, E, int(plan.order), int(record), r, a)
-    iprm = np.empty(_NHEAD + ints.size + 2 * E, np.int64)
-    iprm[:_NHEAD] = head
-    iprm[_NHEAD:_NHEAD + ints.size] = ints
     if E:
-        iprm[_NHEAD + ints.size:] = np.concatenate([np.asarray(problem.event_terminal).reshape(E),
-                                                     np.asarray(problem.event_direction).reshape(E)])
-    fprm = np.empty(_FHEAD + floats.size)
+        cache = {}
+    key = ("iprm", plan.name, id(cplan), problem.mode, problem.chart, kind, bool(problem.skew),
+           bool(problem.adaptive), int(problem.max_steps), bool(problem.reproject), bool(record))
+    iprm = cache.get(key)
+    if iprm is None:
+        mode = MODES[problem.mode]
+        k, m, q = int(problem.k), int(problem.m), int(problem.q)
+        S, s = plan.S, plan.s
+        r = S + 1 if kind == "lowrank" else 0
+        a = {None: 0, "so3": 3, "so4": 6, "dense": m * m, "lowrank": r * r}[kind]
+        head = (k, m, q, mode, CHARTS[problem.chart if mode else None], KINDS[kind], int(problem.skew),
+                int(bool(cplan.has_gamma) and mode != 0), s, S, plan.err.shape[0], plan.dense.shape[1],
+                int(plan.fsal), int(plan.new_in_step), int(problem.adaptive), int(problem.max_steps),
+                int(problem.reproject), max(RENORM_EVERY, m), nb, cplan.field_value.size,
+                cplan.omega_value.size, E, int(plan.order), int(record), r, a)
+        iprm = np.empty(_NHEAD + ints.size + 2 * E, np.int64)
+        iprm[:_NHEAD] = head
+        iprm[_NHEAD:_NHEAD + ints.size] = ints
+        if E:
+            iprm[_NHEAD + ints.size:] = np.concatenate([np.asarray(problem.event_terminal).reshape(E),
+                                                         np.asarray(problem.event_direction).reshape(E)])
+        cache[key] = iprm
+    fprm = floats.copy()
     fprm[:_FHEAD] = (problem.t0, problem.t1, abs(float(problem.h)), problem.rtol, problem.atol,
                      plan.error_exponent)
-    fprm[_FHEAD:] = floats
     return iprm, fprm
 
 
@@ -166,40 +191,58 @@ def _compiled(family: int, args: tuple):
     return entry
 
 
+@functools.lru_cache(maxsize=64)
+def _empty(shape: tuple, dtype=float) -> np.ndarray:
+    """A zero-size array of ``shape``, shared: it holds nothing to write (its allocation is ~0.5 µs of a
+    front-door call on a shared machine, and a call has up to ten)."""
+    return np.empty(shape, dtype)
+
+
+def _nans(shape: tuple) -> np.ndarray:
+    """An output array of NaN (the shared empty one when ``shape`` has no entry)."""
+    if 0 in shape:
+        return _empty(shape)
+    out = np.empty(shape)
+    out.fill(np.nan)  # (np.full is a Python function: ~1 µs more a call)
+    return out
+
+
 def solve(problem: Problem) -> RawResult:
     """Integrate ``problem`` on the compiled kernel (see the module docstring); ``RawResult.backend == "numba"``."""
-    kind, cplan = _prepare(problem)
+    cache = _model_cache(problem.model)
+    kind, cplan = _prepare(problem, cache)
     B, k, q = int(problem.B), int(problem.k), int(problem.q)
     record = problem.t_eval is None
     if record and B != 1:
         raise ValueError("t_eval=None (record every step) needs a single trajectory")
-    iprm, fprm = _pack(problem, kind, cplan, record)
+    iprm, fprm = _pack(problem, kind, cplan, record, cache)
     # fresh C-contiguous writable copies: the compiled loop's argument types never vary (see _compiled)
     xi0 = np.array(problem.xi0, dtype=float, order="C").reshape(B, k)
-    G0 = np.array(problem.G0, dtype=float, order="C").reshape(B, q)
-    gamma = np.array(problem.gamma, dtype=float, order="C").reshape(B, -1)
-    t_eval = np.zeros(0) if record else np.array(problem.t_eval, dtype=float, order="C")
+    G0 = np.array(problem.G0, dtype=float, order="C").reshape(B, q) if q else _empty((B, 0))
+    gamma = problem.gamma
+    gamma = np.array(gamma, dtype=float, order="C").reshape(B, -1) if gamma.size else _empty((B, 0))
+    t_eval = _empty((0,)) if record else np.array(problem.t_eval, dtype=float, order="C")
     E = int(iprm[_I_NEV])
     if E:
         ev_coef = np.array(problem.event_coef, dtype=float, order="C").reshape(B, E, k + q)
         ev_off = np.array(problem.event_offset, dtype=float, order="C").reshape(B, E)
     else:
-        ev_coef, ev_off = np.zeros((B, 0, k + q)), np.zeros((B, 0))
+        ev_coef, ev_off = _empty((B, 0, k + q)), _empty((B, 0))
     cap = EVENT_CAP if E else 0
     while True:
         M = 0 if record else t_eval.shape[0]
-        xi_out = np.full((M, B, k), np.nan)
-        G_out = np.full((M, B, q), np.nan)
-        status = np.zeros(B, np.int64)
+        xi_out, G_out = _nans((M, B, k)), _nans((M, B, q))
+        counts = np.zeros((5, B), np.int64)  # rows: C-contiguous views, the loop's argument types
+        status, failure, nfev, steps, rejected = counts
         t_stop = np.zeros(B)
-        failure = np.zeros(B, np.int64)
-        nfev = np.zeros(B, np.int64)
-        steps = np.zeros(B, np.int64)
-        rejected = np.zeros(B, np.int64)
-        ev_count = np.zeros((B, E), np.int64)
-        ev_t = np.zeros((B, E, cap))
-        ev_xi = np.zeros((B, E, cap, k))
-        ev_G = np.zeros((B, E, cap, q))
+        if E:
+            ev_count = np.zeros((B, E), np.int64)
+            ev_t = np.empty((B, E, cap))  # written before they are read, at ev_count
+            ev_xi = np.empty((B, E, cap, k))
+            ev_G = np.empty((B, E, cap, q))
+        else:
+            ev_count = _empty((B, 0), np.int64)
+            ev_t, ev_xi, ev_G = _empty((B, 0, 0)), _empty((B, 0, 0, k)), _empty((B, 0, 0, q))
         args = (iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap, xi_out, G_out, status, t_stop,
                 failure, nfev, steps, rejected, ev_count, ev_t, ev_xi, ev_G)
         solve_one = _compiled(FAMILIES[KINDS[kind]], args)
