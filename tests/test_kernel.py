@@ -512,3 +512,28 @@ def test_the_first_compilation_prints_no_numba_warning(tmp_path):
     res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=900,
                          check=False)
     assert res.returncode == 0 and res.stdout.strip() == "numba", res.stderr[-2000:]
+
+
+def test_per_model_caches_follow_every_setting():
+    """The kernel keeps its judgement of a model and the integer head per (model, setting): calls on one model
+    that differ only in max_steps, reproject, adaptivity, output or chart must each run as asked (a stale
+    head would run the previous call's settings)."""
+    case = ls.cases.klebsh_tisserand(np.array([1.0, 2.0, 3.0, 4.0]), np.array([2.0, 2.5, 3.0, 1.5]))
+    rng = np.random.default_rng(5)
+    Om0 = case.system.constraints.project(rng.standard_normal(6))
+    G0 = np.array([0.5, 0.5, 0.5, 0.5])
+    run = lambda **kw: ls.integrate(case.system, Om0, (0.0, 2.0), Gamma0=G0, backend="numba", **kw)  # noqa: E731
+    full = run(method="rkmk4", h=0.01)
+    assert full.success and full.stats["steps"] == 200
+    short = run(method="rkmk4", h=0.01, max_steps=7)
+    assert short.status == -1 and "max_steps" in short.message and short.stats["steps"] == 7
+    again = run(method="rkmk4", h=0.01)
+    assert again.success and np.array_equal(again.Omega, full.Omega)
+    adaptive = run(method="rkmk45", rtol=1e-6)
+    assert adaptive.success and adaptive.stats["steps"] < 200 and adaptive.stats["rejected"] >= 0
+    dense = run(method="rkmk4", h=0.01, t_eval=[0.5, 1.0, 2.0])
+    assert dense.t.shape == (3,) and np.allclose(dense.Omega[-1], full.Omega[-1], rtol=0, atol=1e-14)
+    cay = run(method="rkmk4", h=0.01, chart="cayley")
+    assert cay.stats["chart"] == "cayley" and 0 < np.abs(cay.Omega[-1] - full.Omega[-1]).max() < 1e-6
+    recon = run(method="rkmk4", h=0.01, reconstruct=True)
+    assert recon.g is not None and np.abs(recon.Omega[-1] - full.Omega[-1]).max() < 1e-12
