@@ -222,3 +222,26 @@ def test_timed_together_alternates_the_calls_and_keeps_each_minimum():
     # one warm-up call each, then rounds a, b, a, b, ...: a slow spell of the machine hits both sides
     assert calls == ["a", "b"] + ["a", "b"] * count and count == 3
     assert (ra, rb) == (1, 2) and 0.0 <= ta < math.inf and 0.0 <= tb < math.inf
+
+
+def test_a_scene_is_timed_in_rounds_over_both_libraries_and_a_failing_run_is_recorded(monkeypatch):
+    """execute_tasks: one warm-up call of each run (its result measured), then rounds calling every working
+    run once each, liesuslov and scipy alternating; a run that raises is a failed row, the others are timed."""
+    from liesuslov.bench import runners
+    from liesuslov.bench.scenes import build_scene
+
+    scene = build_scene("suslov3")
+    ref = runners.build_reference(scene, {} if BACKEND is None else {"backend": BACKEND})
+    tasks = [runners._Task("suslov3", "liesuslov", "rkmk4", "-", "h", 0.5),
+             runners._Task("suslov3", "scipy", "DOP853", "-", "rtol", 1e-6),
+             runners._Task("suslov3", "liesuslov", "rkmk4", "-", "h", -1.0)]  # h < 0: a ValueError
+    calls: list[str] = []
+    real_ls, real_sp = runners._run_liesuslov, runners._run_scipy
+    monkeypatch.setattr(runners, "_run_liesuslov", lambda *a: (calls.append("ls"), real_ls(*a))[1])
+    monkeypatch.setattr(runners, "_run_scipy", lambda *a: (calls.append("sp"), real_sp(*a))[1])
+    rows = runners.execute_tasks(tasks, scene, ref, 3, {} if BACKEND is None else {"backend": BACKEND})
+    assert [r["status"] for r in rows] == ["ok", "ok", "failed"]
+    assert "ValueError" in rows[2]["message"] and math.isnan(rows[2]["wall_time"])
+    assert rows[0]["repeats"] == rows[1]["repeats"] == 3
+    assert calls == ["ls", "sp", "ls"] + ["ls", "sp"] * 3  # warm-ups (the failing one too), then rounds
+    assert _f(rows[0]["error"]) < 1e-3 and _f(rows[1]["error"]) < 1e-4

@@ -17,7 +17,7 @@ from .machine import machine_info
 from .metrics import fit_exponent, ratio_table
 from .runners import (
     build_reference,
-    execute_task,
+    execute_tasks,
     long_run,
     plan_tasks,
     scaling_backends,
@@ -99,9 +99,9 @@ def run_bench(out_dir, *, quick: bool = False, scenes: Sequence[str] | None = No
                 continue
             report.references[key] = {**entry, "uncertainty": ref.uncertainty, "details": ref.details}
             tick(f"{key}: reference")
-            for task in plans[key]:
-                report.rows.append(execute_task(task, scene, ref, config.repeats, extra_kw))
-                tick(f"{key}: {task.route} {task.kind}={task.value:.2g}")
+            report.rows.extend(execute_tasks(plans[key], scene, ref, config.repeats, extra_kw,
+                                             lambda task, key=key: tick(f"{key}: {task.route} "
+                                                                        f"{task.kind}={task.value:.2g}")))
         report.throughput = throughput_sweep(config, extra_kw, lambda: tick("throughput"))
         report.scaling = scaling_sweep(config, extra_kw, lambda: tick("n-scaling"))
         report.scaling_exponent = fit_exponent(report.scaling)

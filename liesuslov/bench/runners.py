@@ -21,7 +21,7 @@ from .config import (
 )
 from .metrics import Reference, max_abs, nan_row, run_metrics
 from .scenes import BenchScene, scaling_scene, throughput_case
-from .timing import ISOLATE_BATCH, ISOLATE_N, affordable_steps, guarded, timed
+from .timing import ISOLATE_BATCH, ISOLATE_N, affordable_steps, guarded, timed, timed_together
 
 #: Seconds one call of a throughput measurement may take (fewer steps beyond).
 THROUGHPUT_BUDGET_S = 3.0
@@ -151,32 +151,57 @@ def plan_tasks(config: BenchConfig, scene: BenchScene) -> list[_Task]:
     return tasks
 
 
-def execute_task(task: _Task, scene: BenchScene, ref: Reference, repeats: int, extra_kw: dict) -> dict:
-    """Time one run and measure it against the reference: a row of ``results.csv`` (failures recorded)."""
-    row: dict = {"scene": task.scene, "library": task.library, "route": task.route, "method": task.method,
-                 "chart": task.chart, "setting_kind": task.kind, "setting": task.value, "t_final": scene.t1,
-                 "ref_uncertainty": ref.uncertainty}
-    chart = "exp" if task.chart == "-" else task.chart
-    try:
+def execute_tasks(tasks: Sequence[_Task], scene: BenchScene, ref: Reference, repeats: int, extra_kw: dict,
+                  tick: Callable[[_Task], None] = lambda task: None) -> list[dict]:
+    """Time a scene's runs and measure them against the reference: rows of ``results.csv`` (failures recorded).
+
+    Every run is made once (the warm-up, whose result is measured; a run that raises is a failed row), then
+    the working runs of both libraries are timed together in rounds, each round calling each run once
+    (:func:`~.timing.timed_together`): a slow spell of the shared machine lasting seconds slows both
+    libraries' runs alike instead of whichever was being timed then (scipy's time for one run of the same
+    scene once varied 0.76–1.35 ms between two benchmark runs timed one run after the other).
+    """
+    errors = (ValueError, RuntimeError, FloatingPointError, MemoryError, np.linalg.LinAlgError)
+    rows, fns, sols, live = [], [], [], []
+    for task in tasks:
+        row: dict = {"scene": task.scene, "library": task.library, "route": task.route, "method": task.method,
+                     "chart": task.chart, "setting_kind": task.kind, "setting": task.value, "t_final": scene.t1,
+                     "ref_uncertainty": ref.uncertainty}
+        chart = "exp" if task.chart == "-" else task.chart
         if task.library == "liesuslov":
-            sol, wall, count = timed(lambda: _run_liesuslov(scene, task.method, chart, task.kind, task.value,
-                                                             extra_kw), repeats)
-            ok, msg = sol.success, sol.message
+            fn = (lambda m=task.method, c=chart, k=task.kind, v=task.value:
+                  _run_liesuslov(scene, m, c, k, v, extra_kw))
+        else:
+            fn = lambda m=task.method, v=task.value: _run_scipy(scene, m, v)  # noqa: E731
+        try:
+            sol = fn()
+        except errors as exc:
+            row.update(nan_row(), wall_time=float("nan"), repeats=0, status="failed",
+                       message=f"{type(exc).__name__}: {exc}", backend="")
+        else:
+            fns.append(fn)
+            sols.append(sol)
+            live.append(len(rows))
+        rows.append(row)
+        tick(task)
+    timings, count = timed_together(tuple(fns), repeats, warmed=sols) if fns else ([], 0)
+    for i, (sol, wall) in zip(live, timings, strict=True):
+        task, row = tasks[i], rows[i]
+        if task.library == "liesuslov":
             row.update(backend=sol.stats.get("backend", "numpy"), nfev=sol.stats.get("nfev"),
                        steps=sol.stats.get("steps"), rejected=sol.stats.get("rejected"))
             traj = trajectory_liesuslov(sol)
         else:
-            sol, wall, count = timed(lambda: _run_scipy(scene, task.method, task.value), repeats)
-            ok, msg = sol.success, sol.message
             row.update(backend="scipy", nfev=sol.nfev, steps=len(sol.t) - 1, rejected="")
             traj = trajectory_scipy(scene, sol)
-        row.update(wall_time=wall, repeats=count, status="ok" if ok else "failed", message=str(msg))
-        with np.errstate(all="ignore"):
-            row.update(run_metrics(scene, ref, *traj) if ok else nan_row())
-    except (ValueError, RuntimeError, FloatingPointError, MemoryError, np.linalg.LinAlgError) as exc:
-        row.update(nan_row(), wall_time=float("nan"), repeats=0, status="failed",
-                   message=f"{type(exc).__name__}: {exc}", backend=row.get("backend", ""))
-    return row
+        ok = bool(sol.success)
+        row.update(wall_time=wall, repeats=count, status="ok" if ok else "failed", message=str(sol.message))
+        try:
+            with np.errstate(all="ignore"):
+                row.update(run_metrics(scene, ref, *traj) if ok else nan_row())
+        except errors as exc:
+            row.update(nan_row(), status="failed", message=f"{type(exc).__name__}: {exc}")
+    return rows
 
 
 def measure_throughput(n: int, batch: int, steps: int, repeats: int, extra_kw: dict) -> dict:

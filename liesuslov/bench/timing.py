@@ -27,16 +27,17 @@ def timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, float, int]:
 
 
 def timed_together(fns: tuple[Callable[[], Any], ...], repeats: int,
-                   budget_s: float | None = None) -> tuple[list[tuple[Any, float]], int]:
+                   budget_s: float | None = None, warmed: list | None = None) -> tuple[list[tuple[Any, float]], int]:
     """Warm up each of ``fns`` once, then time up to ``repeats`` rounds, each round calling every function once
     in turn, and no new round once their total passes ``budget_s`` (default ``REPEAT_BUDGET_S`` per function);
-    returns ([(warm-up result, min time) per function], rounds).
+    returns ([(warm-up result, min time) per function], rounds). ``warmed``: the warm-up results, when the
+    caller has already made that call of each function (to see which ones fail).
 
     Interleaved rounds make a ratio of two timings fair on a shared machine: a slow spell (another job, a
     frequency change) lasting seconds hits both sides of the ratio, where timing one side after the other
     puts it in one of them (we saw the same code at 0.33 and 0.63 µs a step a minute apart).
     """
-    results = [fn() for fn in fns]
+    results = [fn() for fn in fns] if warmed is None else list(warmed)
     best = [math.inf] * len(fns)
     count, total = 0, 0.0
     enabled = gc.isenabled()
