@@ -3,6 +3,7 @@ throughput, the cost per step against n and the long run."""
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -169,10 +170,9 @@ def execute_tasks(tasks: Sequence[_Task], scene: BenchScene, ref: Reference, rep
                      "ref_uncertainty": ref.uncertainty}
         chart = "exp" if task.chart == "-" else task.chart
         if task.library == "liesuslov":
-            fn = (lambda m=task.method, c=chart, k=task.kind, v=task.value:
-                  _run_liesuslov(scene, m, c, k, v, extra_kw))
+            fn = functools.partial(_run_liesuslov, scene, task.method, chart, task.kind, task.value, extra_kw)
         else:
-            fn = lambda m=task.method, v=task.value: _run_scipy(scene, m, v)  # noqa: E731
+            fn = functools.partial(_run_scipy, scene, task.method, task.value)
         try:
             sol = fn()
         except errors as exc:
