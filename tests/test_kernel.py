@@ -540,3 +540,33 @@ def test_per_model_caches_follow_every_setting():
     assert cay.stats["chart"] == "cayley" and 0 < np.abs(cay.Omega[-1] - full.Omega[-1]).max() < 1e-6
     recon = run(method="rkmk4", h=0.01, reconstruct=True)
     assert recon.g is not None and np.abs(recon.Omega[-1] - full.Omega[-1]).max() < 1e-12
+
+
+def test_borrowed_views_are_the_owners_memory():
+    """common._view: the entries arr.flat[offset : offset + prod(shape)] in C order, for a 1-D or 2-D owner and
+    an int or tuple shape, written through to the owner (the group operations of the matrix kinds compute in
+    such views of the kernel's flat scratch)."""
+    from numba import njit
+
+    from liesuslov.integrators.kernel.common import _borrow, _view
+
+    @njit
+    def views(flat, grid):
+        A = _view(flat, 3, (2, 4))
+        W = _view(flat, 1, (2, 2, 3))
+        v = _view(grid, grid.shape[1], 5)  # row 1 of grid and on
+        B = _borrow(grid)
+        B[2, 1] = -7.0  # written into the owner
+        A[1, 0] = -1.0
+        return A.copy(), W.copy(), v.copy(), B.shape
+
+    flat = np.arange(20.0)
+    grid = np.arange(12.0).reshape(3, 4)
+    A, W, v, shape = views(flat, grid)
+    expect = np.arange(20.0)
+    expect[7] = -1.0  # A[1, 0], written before the copies
+    np.testing.assert_array_equal(W, expect[1:13].reshape(2, 2, 3))
+    np.testing.assert_array_equal(A, expect[3:11].reshape(2, 4))
+    np.testing.assert_array_equal(flat, expect)
+    np.testing.assert_array_equal(v, np.arange(4.0, 9.0))
+    assert shape == (3, 4) and grid[2, 1] == -7.0

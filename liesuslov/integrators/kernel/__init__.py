@@ -27,6 +27,18 @@ inlined — the finiteness test of a step is folded into the loops that form its
 trajectory and the rarer jobs are calls, the first step computes the group velocity in one function.
 Only the loop has numba's CPython wrapper (the others are called from compiled code only).
 
+Reference counting: numba counts references to an array atomically — for every view made by indexing,
+slicing or reshape, and, in a compiled function that calls another compiled function (or, after LLVM, has a
+loop in one branch only), for each of its array arguments on entry and exit. On the 5×5 matrices of a dense
+stage this was ~30% of the step. The group operations therefore get their arrays *borrowed*
+(:func:`~.common._view`, :func:`~.common._borrow`: the same memory without the owner's meminfo, which numba
+does not count), the matrix kinds view their flat scratch as matrices the same way, and the scalar closed
+forms (Rodrigues, Cayley, the so(3) dexp⁻¹ coefficient, the so(3) operations) are straight-line code inlined
+at IR level, whose arrays numba does not count at all. Measured (interleaved processes, same machine):
+the Kharlamova scene's compiled solve (dense SO(5), Cayley, 16 RKMK8 steps) 232 -> 165 µs; dense SO(5) RKMK4
+with reconstruction 3.0 -> 2.2 µs per step; Fedorov–Kozlov low rank n = 64 40 -> 34 µs per step; so(3)
+~3% per step.
+
 The on-disk cache: numba stamps a cached function with its own file, but a compiled caller embeds its
 callees' code; every function here is stamped with the contents of all the kernel's sources
 (:data:`~.common.KERNEL_SOURCES`: this package, ``control.py`` and ``groups/``), so a change in any of
@@ -64,9 +76,10 @@ What is compiled
 Layouts of an algebra element (a stage's ``h K_j``): so3 3 numbers ``(X21, X02, X10)``, so4 6 numbers
 ``(p, q)``, dense m² (row major), lowrank r² (the r×r coordinates M in the step's basis).
 
-Shared closed forms: ``groups._cayley_coefficients`` and ``groups._dexp3_series`` are jitted as they stand;
-``groups._rodrigues`` and ``groups._dexp3_coefficient`` branch on ``isinstance`` (numpy arrays or floats)
-and cannot be compiled: :func:`_rodrigues` and :func:`_dexp3_coefficient` below are their scalar branches.
+Shared closed forms: ``groups._cayley_coefficients`` and ``groups._dexp3_series`` are jitted as they stand
+(inlined at IR level); ``groups._rodrigues`` and ``groups._dexp3_coefficient`` branch on ``isinstance`` (numpy
+arrays or floats) and cannot be compiled: :func:`.maps._rodrigues` and :func:`.maps._dexp3_coefficient` are
+their scalar branches.
 The so(4) closed forms of :mod:`liesuslov.groups.so4` are registered with ``numba.extending.register_jitable``
 in :mod:`.so4` and compiled as they stand (its docstring names the two scalar branches written there).
 

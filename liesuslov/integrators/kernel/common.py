@@ -7,8 +7,10 @@ import hashlib
 from pathlib import Path
 
 from numba import njit, types
+from numba.core import cgutils
 from numba.core.caching import FunctionCache, IndexDataCacheFile
-from numba.extending import overload
+from numba.extending import intrinsic, overload
+from numba.np.arrayobj import make_array, populate_array
 
 from ... import groups
 from .. import control
@@ -90,14 +92,62 @@ def _jit_inline(fn):
     return njit(inline="always", **_JIT_OPTIONS)(fn)
 
 
+@intrinsic
+def _view(typingctx, arr, offset, shape):
+    """``arr``'s memory from the flat index ``offset`` on, as a C-contiguous array of ``shape`` (an int or a
+    tuple of ints), *borrowed*: without the owner's meminfo, so that numba does not count references to it.
+
+    Why: numba takes an atomic reference on the owner for every view made by indexing, slicing or reshape
+    (reshape also calls a C helper), and every compiled function that calls another takes one for each of its
+    array arguments, on entry and exit; on the 5×5 matrices of a dense stage these were ~30% of the step.
+    A borrowed view (and every view of it, and every callee given it) is not counted. It must not outlive
+    ``arr``: the kernel makes them of its scratch and arguments, inside one call.
+    """
+    if not (isinstance(arr, types.Array) and arr.layout == "C" and isinstance(offset, types.Integer)):
+        return None
+    if isinstance(shape, types.Integer):
+        dim_types = (shape,)
+    elif isinstance(shape, types.BaseTuple) and all(isinstance(t, types.Integer) for t in shape.types):
+        dim_types = tuple(shape.types)
+    else:
+        return None
+    ndim = len(dim_types)
+    rettype = types.Array(arr.dtype, ndim, "C")
+
+    def codegen(context, builder, sig, args):
+        src = make_array(sig.args[0])(context, builder, args[0])
+        raw = [args[2]] if isinstance(shape, types.Integer) else cgutils.unpack_tuple(builder, args[2], ndim)
+        dims = [context.cast(builder, v, t, types.intp) for v, t in zip(raw, dim_types, strict=True)]
+        strides = [None] * ndim
+        step = src.itemsize
+        for i in range(ndim - 1, -1, -1):
+            strides[i] = step
+            step = builder.mul(step, dims[i])
+        data = builder.gep(src.data, [context.cast(builder, args[1], sig.args[1], types.intp)])
+        out = make_array(rettype)(context, builder)
+        populate_array(out, data=data, shape=dims, strides=strides, itemsize=src.itemsize, meminfo=None)
+        return out._getvalue()
+
+    return rettype(arr, offset, shape), codegen
+
+
+@_jit_inline
+def _borrow(arr):
+    """``arr`` itself as a borrowed view (:func:`_view`): what the kernel passes to the group operations."""
+    return _view(arr, 0, arr.shape)
+
+
 _scale = _jit(control.scale)
 _combine = _jit(control.combine)
 _accept_factor = _jit(control.accept_factor)
 _reject_factor = _jit(control.reject_factor)
 _initial_step = _jit(control.initial_step)
 _probe_step = _jit(control.probe_step)
-_cayley_coefficients = _jit(groups._cayley_coefficients)
-_dexp3_series = _jit(groups._dexp3_series)
+# The scalar closed forms are inlined where they are called: a call to a compiled function, even one of
+# scalars, gives its caller an error exit, and numba then keeps the reference counting of every array the
+# caller holds (two atomic operations per array and call: ~12% of a step on so(3)).
+_cayley_coefficients = _jit_inline(groups._cayley_coefficients)
+_dexp3_series = _jit_inline(groups._dexp3_series)
 
 
 # Layout of the packed integer parameters

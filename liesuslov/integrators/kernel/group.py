@@ -20,7 +20,7 @@ import math
 from numba import types
 from numba.extending import overload
 
-from .common import _JIT_OPTIONS, _jit, _jit_inline
+from .common import _JIT_OPTIONS, _borrow, _jit, _jit_inline, _view
 from .maps import _dexp3_coefficient, _mat_act, _mat_dinv, _mat_phi, _mm, _so3_coef
 from .so4 import _so4_dinv, _so4_omega, _so4_rotate, _so4_sq, _so4_state, _so4_update
 
@@ -85,9 +85,13 @@ def _alg_state(family, kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
 
 # A family's implementation of each operation: ``first`` when ``kind == first_kind``, ``other`` otherwise (a
 # run-time branch between the family's two kinds). Written out per operation, not with *args: a tuple of
-# arrays would be packed (and reference-counted) on every call.
+# arrays would be packed (and reference-counted) on every call. The arrays go in borrowed (common._borrow): a
+# compiled function that calls others counts a reference to each of its array arguments, atomically, on entry
+# and exit — unless the argument is borrowed.
 def _omega_by(first_kind, first, other):
     def impl(family, kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
+        x, widx, wval, Om, Q, cvec, out = (_borrow(x), _borrow(widx), _borrow(wval), _borrow(Om), _borrow(Q),
+                                           _borrow(cvec), _borrow(out))
         if kind == first_kind:
             return first(kind, skew, x, widx, wval, Om, Q, nc, cvec, out)
         return other(kind, skew, x, widx, wval, Om, Q, nc, cvec, out)
@@ -104,6 +108,7 @@ def _sq_by(first_kind, first, other):
 
 def _dinv_by(first_kind, first, other):
     def impl(family, kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
+        Th, Om, out, Wf, bern, bufs = _borrow(Th), _borrow(Om), _borrow(out), _borrow(Wf), _borrow(bern), _borrow(bufs)
         if kind == first_kind:
             first(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs)
         else:
@@ -113,6 +118,8 @@ def _dinv_by(first_kind, first, other):
 
 def _act_by(first_kind, first, other):
     def impl(family, kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
+        Th, v, out, Wf, vbf, Q, bufs = (_borrow(Th), _borrow(v), _borrow(out), _borrow(Wf), _borrow(vbf), _borrow(Q),
+                                        _borrow(bufs))
         if kind == first_kind:
             first(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs)
         else:
@@ -122,6 +129,8 @@ def _act_by(first_kind, first, other):
 
 def _update_by(first_kind, first, other):
     def impl(family, kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+        G, Th, out, Wf, vbf, Q, bufs, PQ, PQ2 = (_borrow(G), _borrow(Th), _borrow(out), _borrow(Wf), _borrow(vbf),
+                                                 _borrow(Q), _borrow(bufs), _borrow(PQ), _borrow(PQ2))
         if kind == first_kind:
             first(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2)
         else:
@@ -131,6 +140,8 @@ def _update_by(first_kind, first, other):
 
 def _state_by(first_kind, first, other):
     def impl(family, kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+        G1, Ea, out, Q, bufs, PQ, PQ2 = (_borrow(G1), _borrow(Ea), _borrow(out), _borrow(Q), _borrow(bufs),
+                                         _borrow(PQ), _borrow(PQ2))
         if kind == first_kind:
             first(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2)
         else:
@@ -161,6 +172,7 @@ def _dinv_closed(so3, so4):
 
 def _act_closed(so3, so4):
     def impl(family, kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
+        Th, v, out = _borrow(Th), _borrow(v), _borrow(out)
         if kind == 1:
             so3(chart, Th, sign, v, out)
         else:
@@ -170,6 +182,7 @@ def _act_closed(so3, so4):
 
 def _update_closed(so3, so4):
     def impl(family, kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+        G, Th, out = _borrow(G), _borrow(Th), _borrow(out)
         if kind == 1:
             so3(chart, mode, G, Th, out)
         else:
@@ -179,6 +192,7 @@ def _update_closed(so3, so4):
 
 def _state_closed(so3, so4):
     def impl(family, kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+        G1, Ea, out = _borrow(G1), _borrow(Ea), _borrow(out)
         if kind == 1:
             so3(mode, G1, Ea, out)
         else:
@@ -309,7 +323,7 @@ def _matrix_sq(kind, Th):
 @_jit
 def _block(Th, r, ra, buf):
     """The leading ra×ra block of the r×r matrix stored flat in Th, as a contiguous (ra, ra) matrix."""
-    Mb = buf[:ra * ra].reshape((ra, ra))
+    Mb = _view(buf, 0, (ra, ra))
     for i in range(ra):
         for j in range(ra):
             Mb[i, j] = Th[i * r + j]
@@ -319,7 +333,7 @@ def _block(Th, r, ra, buf):
 @_jit
 def _scratch(Wf, vbf, n):
     """W (12, n, n) and vb (n, 1): C-contiguous views of the flat scratch, sized for n×n matrices."""
-    return Wf[:12 * n * n].reshape((12, n, n)), vbf[:n].reshape((n, 1))
+    return _view(Wf, 0, (12, n, n)), _view(vbf, 0, (n, 1))
 
 
 @_jit
@@ -389,22 +403,21 @@ def _so3_dinv(chart, Th, Om, h, out, row):
 @_jit
 def _dense_dinv(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
     n = int(math.sqrt(Th.shape[0]) + 0.5)
-    W, _ = _scratch(Wf, bufs[1], n)
-    Tm = Th.reshape((n, n))
-    Am = Om.reshape((n, n))
-    Rm = bufs[2][:n * n].reshape((n, n))
-    _mat_dinv(chart, skew, Tm, Am, Rm, W, bern)
-    for i in range(n * n):
-        out[row, i] = h * bufs[2][i]
+    W = _view(Wf, 0, (12, n, n))
+    Rm = _view(bufs, 2 * bufs.shape[1], (n, n))
+    _mat_dinv(chart, skew, _view(Th, 0, (n, n)), _view(Om, 0, (n, n)), Rm, W, bern)
+    for i in range(n):
+        for j in range(n):
+            out[row, i * n + j] = h * Rm[i, j]
 
 
 @_jit
 def _lowrank_dinv(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
     ra = nc
-    W, _ = _scratch(Wf, bufs[2], ra)
-    Tm = _block(Th, r, ra, bufs[0])
-    Am = _block(Om, r, ra, bufs[1])
-    Rm = bufs[2][:ra * ra].reshape((ra, ra))
+    W = _view(Wf, 0, (12, ra, ra))
+    Tm = _block(Th, r, ra, _view(bufs, 0, bufs.shape[1]))
+    Am = _block(Om, r, ra, _view(bufs, bufs.shape[1], bufs.shape[1]))
+    Rm = _view(bufs, 2 * bufs.shape[1], (ra, ra))
     _mat_dinv(chart, skew, Tm, Am, Rm, W, bern)
     for i in range(r * r):
         out[row, i] = 0.0
@@ -414,33 +427,39 @@ def _lowrank_dinv(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs)
 
 
 # ====================================================================================== phi(sign Th) v
+@_jit_inline
+def _rotate3(c, a, b, w0, w1, w2, v0, v1, v2):
+    """(c I + a hat(w) + b w w^T) v = c v + a w × v + b (w·v) w, as three scalars."""
+    d = b * (w0 * v0 + w1 * v1 + w2 * v2)
+    return (c * v0 + a * (w1 * v2 - w2 * v1) + d * w0, c * v1 + a * (w2 * v0 - w0 * v2) + d * w1,
+            c * v2 + a * (w0 * v1 - w1 * v0) + d * w2)
+
+
+# The so3 operations below are straight-line code on scalars, with no call left after inlining: numba then
+# drops the reference counting of their arrays (a call, or a loop in one branch, keeps it: two atomic
+# operations per array and call).
 @_jit
 def _so3_rotate(chart, Th, sign, v, out):
     """out = phi(sign hat(Th)) v = c v + sign a Th × v + b (Th·v) Th."""
     w0, w1, w2 = Th[0], Th[1], Th[2]
     c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
-    a = sign * a
-    v0, v1, v2 = v[0], v[1], v[2]
-    d = b * (w0 * v0 + w1 * v1 + w2 * v2)
-    out[0] = c * v0 + a * (w1 * v2 - w2 * v1) + d * w0
-    out[1] = c * v1 + a * (w2 * v0 - w0 * v2) + d * w1
-    out[2] = c * v2 + a * (w0 * v1 - w1 * v0) + d * w2
+    out[0], out[1], out[2] = _rotate3(c, sign * a, b, w0, w1, w2, v[0], v[1], v[2])
 
 
 @_jit
 def _dense_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
     n = v.shape[0]
     W, vb = _scratch(Wf, vbf, n)
-    _mat_act(chart, skew, Th.reshape((n, n)), sign, v, out, W, vb)
+    _mat_act(chart, skew, _view(Th, 0, (n, n)), sign, v, out, W, vb)
 
 
 @_jit
 def _lowrank_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
     ra = nc
     W, vb = _scratch(Wf, vbf, ra)
-    Mb = _block(Th, r, ra, bufs[0])
-    y = bufs[1][:ra]
-    z = bufs[2][:ra]
+    Mb = _block(Th, r, ra, _view(bufs, 0, bufs.shape[1]))
+    y = _view(bufs, bufs.shape[1], ra)
+    z = _view(bufs, 2 * bufs.shape[1], ra)
     _basis_coordinates(Q, v, ra, y)
     _mat_act(chart, skew, Mb, sign, y, z, W, vb)
     for i in range(ra):
@@ -451,21 +470,17 @@ def _lowrank_act(kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
 # ====================================================================================== g phi(Th) or phi(-Th) Gamma
 @_jit
 def _so3_update(chart, mode, G, Th, out):
-    if mode == 1:
-        _so3_rotate(chart, Th, -1.0, G, out)
-        return
-    # g R with R = c I + a hat(w) + b w w^T, by scalars (no reshape, no scratch)
+    """``phi(-Th) Gamma`` (mode gamma) or ``g phi(Th)`` (mode g) row by row: row i of g R is R^T g_i =
+    phi(-Th) g_i, since R^T = phi(-Th) (no matrix R, no scratch)."""
     w0, w1, w2 = Th[0], Th[1], Th[2]
     c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
-    bw0, bw1, bw2 = b * w0, b * w1, b * w2
-    r00, r01, r02 = c + bw0 * w0, bw0 * w1 - a * w2, bw0 * w2 + a * w1
-    r10, r11, r12 = bw0 * w1 + a * w2, c + bw1 * w1, bw1 * w2 - a * w0
-    r20, r21, r22 = bw0 * w2 - a * w1, bw1 * w2 + a * w0, c + bw2 * w2
-    for i in range(3):
-        g0, g1, g2 = G[3 * i], G[3 * i + 1], G[3 * i + 2]
-        out[3 * i] = g0 * r00 + g1 * r10 + g2 * r20
-        out[3 * i + 1] = g0 * r01 + g1 * r11 + g2 * r21
-        out[3 * i + 2] = g0 * r02 + g1 * r12 + g2 * r22
+    # (if/else, each branch whole: with only the rows 1, 2 under an ``if``, numba keeps the reference counting)
+    if mode == 1:
+        out[0], out[1], out[2] = _rotate3(c, -a, b, w0, w1, w2, G[0], G[1], G[2])
+    else:
+        out[0], out[1], out[2] = _rotate3(c, -a, b, w0, w1, w2, G[0], G[1], G[2])
+        out[3], out[4], out[5] = _rotate3(c, -a, b, w0, w1, w2, G[3], G[4], G[5])
+        out[6], out[7], out[8] = _rotate3(c, -a, b, w0, w1, w2, G[6], G[7], G[8])
 
 
 @_jit
@@ -474,10 +489,10 @@ def _dense_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, 
         _dense_act(kind, chart, skew, Th, -1.0, G, out, Wf, vbf, Q, nc, r, bufs)
         return
     n = int(math.sqrt(G.shape[0]) + 0.5)
-    W, _ = _scratch(Wf, vbf, n)
+    W = _view(Wf, 0, (12, n, n))
     R = W[10]
-    _mat_phi(chart, skew, Th.reshape((n, n)), R, W)
-    _mm(G.reshape((n, n)), R, out.reshape((n, n)))
+    _mat_phi(chart, skew, _view(Th, 0, (n, n)), R, W)
+    _mm(_view(G, 0, (n, n)), R, _view(out, 0, (n, n)))
 
 
 @_jit
@@ -488,30 +503,32 @@ def _lowrank_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs
     # g + (g Q) (phi(M) - I) Q^T
     n = Q.shape[0]
     ra = nc
-    W, _ = _scratch(Wf, vbf, ra)
-    Mb = _block(Th, r, ra, bufs[0])
-    F = bufs[1][:ra * ra].reshape((ra, ra))
+    W = _view(Wf, 0, (12, ra, ra))
+    Mb = _block(Th, r, ra, _view(bufs, 0, bufs.shape[1]))
+    F = _view(bufs, bufs.shape[1], (ra, ra))
     _mat_phi(chart, skew, Mb, F, W)
     for i in range(ra):
         F[i, i] -= 1.0
-    _g_low_rank(G.reshape((n, n)), Q, F, ra, PQ, PQ2, out.reshape((n, n)), True)
+    _g_low_rank(_view(G, 0, (n, n)), Q, F, ra, PQ, PQ2, _view(out, 0, (n, n)), True)
 
 
 # ====================================================================================== the state's error
+@_jit_inline
+def _cross3(u0, u1, u2, v0, v1, v2):
+    """u × v as three scalars."""
+    return u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
+
+
 @_jit
 def _so3_state(mode, G1, Ea, out):
+    """``hat(e) Gamma1 = e × Gamma1`` (mode gamma) or ``g1 hat(e)``, whose row i is ``g1_i × e`` (mode g)."""
     e0, e1, e2 = Ea[0], Ea[1], Ea[2]
     if mode == 1:
-        v0, v1, v2 = G1[0], G1[1], G1[2]
-        out[0] = e1 * v2 - e2 * v1
-        out[1] = e2 * v0 - e0 * v2
-        out[2] = e0 * v1 - e1 * v0
-        return
-    for i in range(3):  # row i of g1 times hat(e)
-        g0, g1, g2 = G1[3 * i], G1[3 * i + 1], G1[3 * i + 2]
-        out[3 * i] = g1 * e2 - g2 * e1
-        out[3 * i + 1] = g2 * e0 - g0 * e2
-        out[3 * i + 2] = g0 * e1 - g1 * e0
+        out[0], out[1], out[2] = _cross3(e0, e1, e2, G1[0], G1[1], G1[2])
+    else:
+        out[0], out[1], out[2] = _cross3(G1[0], G1[1], G1[2], e0, e1, e2)
+        out[3], out[4], out[5] = _cross3(G1[3], G1[4], G1[5], e0, e1, e2)
+        out[6], out[7], out[8] = _cross3(G1[6], G1[7], G1[8], e0, e1, e2)
 
 
 @_jit
@@ -525,17 +542,17 @@ def _dense_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
             out[i] = acc
         return
     n = int(math.sqrt(G1.shape[0]) + 0.5)
-    _mm(G1.reshape((n, n)), Ea.reshape((n, n)), out.reshape((n, n)))
+    _mm(_view(G1, 0, (n, n)), _view(Ea, 0, (n, n)), _view(out, 0, (n, n)))
 
 
 @_jit
 def _lowrank_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
     n = Q.shape[0]
     ra = nc
-    Eb = _block(Ea, r, ra, bufs[0])
+    Eb = _block(Ea, r, ra, _view(bufs, 0, bufs.shape[1]))
     if mode == 1:
-        y = bufs[1][:ra]
-        z = bufs[2][:ra]
+        y = _view(bufs, bufs.shape[1], ra)
+        z = _view(bufs, 2 * bufs.shape[1], ra)
         _basis_coordinates(Q, G1, ra, y)
         for i in range(ra):
             acc = 0.0
@@ -544,7 +561,7 @@ def _lowrank_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
             z[i] = acc
         _from_basis(Q, z, ra, G1, False, out)
         return
-    _g_low_rank(G1.reshape((n, n)), Q, Eb, ra, PQ, PQ2, out.reshape((n, n)), False)
+    _g_low_rank(_view(G1, 0, (n, n)), Q, Eb, ra, PQ, PQ2, _view(out, 0, (n, n)), False)
 
 
 # ============================================================================ the tables (codes: common.KINDS)

@@ -53,6 +53,7 @@ from .common import (
     _probe_step,
     _reject_factor,
     _scale,
+    _view,
 )
 from .group import _alg_act, _alg_dinv, _alg_sq, _alg_state, _alg_update, _field, _field_call, _omega_alg
 from .maps import _PI2, _polar_step
@@ -414,7 +415,7 @@ def _reproject(mode, G, Wg):
     """Back onto the group: one Newton–Schulz step for g (mode g), |Gamma| = 1 (mode gamma)."""
     if mode == 2:
         m = Wg.shape[1]
-        _polar_step(G.reshape((m, m)), Wg[0], Wg[1])
+        _polar_step(_view(G, 0, (m, m)), Wg[0], Wg[1])
     elif mode == 1:
         acc = 0.0
         for c in range(G.shape[0]):
