@@ -53,7 +53,7 @@ def as_float_array(x: Any, name: str, *, ndim_min: int = 0, tail: tuple[int, ...
         if arr.ndim < len(tail) or arr.shape[arr.ndim - len(tail):] != tuple(tail):
             want = "(..., " + ", ".join(str(t) for t in tail) + ")"
             raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
-    if finite and not np.isfinite(arr).all():
+    if finite and not np.logical_and.reduce(np.isfinite(arr), axis=None):  # (ndarray.all: ~1 µs more, in Python)
         raise ValueError(f"{name} contains NaN or infinite values; pass finite numbers")
     return arr
 
@@ -123,7 +123,12 @@ def unit_vectors(x: np.ndarray, name: str, *, tol: float = 1e-8) -> np.ndarray:
 
     The division removes the rounding of the given data, so unit vectors stay unit to 1e-16.
     """
-    nrm = np.sqrt((x * x).sum(axis=-1))  # np.linalg.norm's own formula on a last axis, without its ~4 µs of checks
+    nrm = np.sqrt(np.add.reduce(x * x, axis=-1))  # np.linalg.norm's own formula, without its ~4 µs of checks
+    if nrm.ndim == 0:  # one vector: the same test and division on the Python float (~4 µs less per call)
+        if x.size and not abs(float(nrm) - 1.0) <= tol:
+            raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got |{name}| = "
+                             f"{float(nrm):.6g}: pass {name} / |{name}|")
+        return x / nrm
     if x.size and not (np.abs(nrm - 1.0) <= tol).all():
         raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got norms in "
                          f"[{nrm.min():.6g}, {nrm.max():.6g}]: pass {name} / |{name}|")

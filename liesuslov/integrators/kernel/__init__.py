@@ -32,9 +32,11 @@ slicing or reshape, and, in a compiled function that calls another compiled func
 loop in one branch only), for each of its array arguments on entry and exit. On the 5×5 matrices of a dense
 stage this was ~30% of the step. The group operations therefore get their arrays *borrowed*
 (:func:`~.common._view`, :func:`~.common._borrow`: the same memory without the owner's meminfo, which numba
-does not count), the matrix kinds view their flat scratch as matrices the same way, and the scalar closed
-forms (Rodrigues, Cayley, the so(3) dexp⁻¹ coefficient, the so(3) operations) are straight-line code inlined
-at IR level, whose arrays numba does not count at all. Measured (interleaved processes, same machine):
+does not count), the matrix kinds view their flat scratch as matrices the same way, and the so(3) operations are
+straight-line code on scalars. Borrowing is kept to arrays passed *into* compiled calls: borrowed views
+written by code inlined at IR level into the loop (the stage's field and dexp⁻¹) gave wrong numbers at the
+continuous extension's stages in one test (not understood; reverted), so the loop's own code only reads
+and writes the owners. Measured (interleaved processes, same machine):
 the Kharlamova scene's compiled solve (dense SO(5), Cayley, 16 RKMK8 steps) 232 -> 165 µs; dense SO(5) RKMK4
 with reconstruction 3.0 -> 2.2 µs per step; Fedorov–Kozlov low rank n = 64 40 -> 34 µs per step; so(3)
 ~3% per step.
@@ -76,8 +78,8 @@ What is compiled
 Layouts of an algebra element (a stage's ``h K_j``): so3 3 numbers ``(X21, X02, X10)``, so4 6 numbers
 ``(p, q)``, dense m² (row major), lowrank r² (the r×r coordinates M in the step's basis).
 
-Shared closed forms: ``groups._cayley_coefficients`` and ``groups._dexp3_series`` are jitted as they stand
-(inlined at IR level); ``groups._rodrigues`` and ``groups._dexp3_coefficient`` branch on ``isinstance`` (numpy
+Shared closed forms: ``groups._cayley_coefficients`` and ``groups._dexp3_series`` are jitted as they stand;
+``groups._rodrigues`` and ``groups._dexp3_coefficient`` branch on ``isinstance`` (numpy
 arrays or floats) and cannot be compiled: :func:`.maps._rodrigues` and :func:`.maps._dexp3_coefficient` are
 their scalar branches.
 The so(4) closed forms of :mod:`liesuslov.groups.so4` are registered with ``numba.extending.register_jitable``

@@ -143,11 +143,8 @@ _accept_factor = _jit(control.accept_factor)
 _reject_factor = _jit(control.reject_factor)
 _initial_step = _jit(control.initial_step)
 _probe_step = _jit(control.probe_step)
-# The scalar closed forms are inlined where they are called: a call to a compiled function, even one of
-# scalars, gives its caller an error exit, and numba then keeps the reference counting of every array the
-# caller holds (two atomic operations per array and call: ~12% of a step on so(3)).
-_cayley_coefficients = _jit_inline(groups._cayley_coefficients)
-_dexp3_series = _jit_inline(groups._dexp3_series)
+_cayley_coefficients = _jit(groups._cayley_coefficients)
+_dexp3_series = _jit(groups._dexp3_series)
 
 
 # Layout of the packed integer parameters

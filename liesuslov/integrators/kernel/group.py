@@ -435,9 +435,9 @@ def _rotate3(c, a, b, w0, w1, w2, v0, v1, v2):
             c * v2 + a * (w0 * v1 - w1 * v0) + d * w2)
 
 
-# The so3 operations below are straight-line code on scalars, with no call left after inlining: numba then
-# drops the reference counting of their arrays (a call, or a loop in one branch, keeps it: two atomic
-# operations per array and call).
+# The so3 operations below are straight-line code on scalars (no matrix, no scratch, no loop in one branch
+# only); their arrays come borrowed from the family dispatch, so the reference counting numba keeps around
+# the call of _so3_coef is not atomic.
 @_jit
 def _so3_rotate(chart, Th, sign, v, out):
     """out = phi(sign hat(Th)) v = c v + sign a Th × v + b (Th·v) Th."""

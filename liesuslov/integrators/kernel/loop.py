@@ -153,7 +153,7 @@ def _crossings(gold, gnew, at_start, ev_dir, act_e):
 
 
 @_jit
-def _dense_state(family, kind, chart, skew, mode, th, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb, Q, nc, r, bufs,
+def _state_at(family, kind, chart, skew, mode, th, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb, Q, nc, r, bufs,
                  PQ, PQ2):
     """The state at theta of the step on the continuous extension: ``xit`` and ``Gt`` (g phi(Theta(theta))
     or phi(-Theta(theta)) Gamma)."""
@@ -343,7 +343,7 @@ def _locate(family, kind, chart, skew, mode, bi, n_act, act_e, act_th, gold, gne
             for c in range(q):
                 Gt[c] = G1[c]
         else:
-            _dense_state(family, kind, chart, skew, mode, th_, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb, Q, nc, r,
+            _state_at(family, kind, chart, skew, mode, th_, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb, Q, nc, r,
                          bufs, PQ, PQ2)
         cnt = ev_count[bi, e]
         if cnt < cap:
@@ -376,7 +376,7 @@ def _outputs(family, kind, chart, skew, mode, bi, ie, t_eval, t_lim, t, h, t_new
             for c in range(q):
                 G_out[ie, bi, c] = G1[c]
         else:
-            _dense_state(family, kind, chart, skew, mode, (te - t) / h, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb,
+            _state_at(family, kind, chart, skew, mode, (te - t) / h, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb,
                          Q, nc, r, bufs, PQ, PQ2)
             for c in range(k):
                 xi_out[ie, bi, c] = xit[c]

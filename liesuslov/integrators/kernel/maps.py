@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from ... import groups
-from .common import _cayley_coefficients, _dexp3_series, _jit, _jit_inline
+from .common import _cayley_coefficients, _dexp3_series, _jit
 
 
 # ====================================================================================== small linear algebra
@@ -139,7 +139,7 @@ def _bracket(skew, A, B, C):
 
 
 # ---------------------------------------------------------------------- so(3) closed forms (scalar branches)
-@_jit_inline
+@_jit
 def _rodrigues(t2):
     """(cos θ, sin θ/θ, (1 - cos θ)/θ²) from θ², by the half angle: the scalar branch of ``groups._rodrigues``."""
     x2 = 0.25 * t2
@@ -152,7 +152,7 @@ def _rodrigues(t2):
     return 1.0 - b * t2, s * math.cos(x), b
 
 
-@_jit_inline
+@_jit
 def _dexp3_coefficient(t2):
     """(1 - (θ/2) cot(θ/2)) / θ²: the scalar branch of ``groups._dexp3_coefficient``."""
     if t2 < groups._DEXP3_TAYLOR ** 2:
@@ -161,7 +161,7 @@ def _dexp3_coefficient(t2):
     return (1.0 - x * math.cos(x) / math.sin(x)) / t2
 
 
-@_jit_inline
+@_jit
 def _so3_coef(chart, t2):
     """(c, a, b) with phi(hat w) = c I + a hat(w) + b w w^T."""
     if chart == 0:
