@@ -22,7 +22,7 @@ from numba.extending import overload
 
 from .common import _JIT_OPTIONS, _borrow, _jit, _jit_inline, _view
 from .maps import _dexp3_coefficient, _mat_act, _mat_dinv, _mat_phi, _mm, _so3_coef
-from .so4 import _so4_dinv, _so4_omega, _so4_rotate, _so4_sq, _so4_state, _so4_update
+from .so4 import _so3_lin_c, _so4_dinv, _so4_omega, _so4_rotate, _so4_sq, _so4_state, _so4_update
 
 
 # ====================================================================================== the model
@@ -427,14 +427,6 @@ def _lowrank_dinv(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs)
 
 
 # ====================================================================================== phi(sign Th) v
-@_jit_inline
-def _rotate3(c, a, b, w0, w1, w2, v0, v1, v2):
-    """(c I + a hat(w) + b w w^T) v = c v + a w × v + b (w·v) w, as three scalars."""
-    d = b * (w0 * v0 + w1 * v1 + w2 * v2)
-    return (c * v0 + a * (w1 * v2 - w2 * v1) + d * w0, c * v1 + a * (w2 * v0 - w0 * v2) + d * w1,
-            c * v2 + a * (w0 * v1 - w1 * v0) + d * w2)
-
-
 # The so3 operations below are straight-line code on scalars (no matrix, no scratch, no loop in one branch
 # only); their arrays come borrowed from the family dispatch, so the reference counting numba keeps around
 # the call of _so3_coef is not atomic.
@@ -443,7 +435,7 @@ def _so3_rotate(chart, Th, sign, v, out):
     """out = phi(sign hat(Th)) v = c v + sign a Th × v + b (Th·v) Th."""
     w0, w1, w2 = Th[0], Th[1], Th[2]
     c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
-    out[0], out[1], out[2] = _rotate3(c, sign * a, b, w0, w1, w2, v[0], v[1], v[2])
+    out[0], out[1], out[2] = _so3_lin_c(c, sign * a, b, (w0, w1, w2), (v[0], v[1], v[2]))
 
 
 @_jit
@@ -474,13 +466,11 @@ def _so3_update(chart, mode, G, Th, out):
     phi(-Th) g_i, since R^T = phi(-Th) (no matrix R, no scratch)."""
     w0, w1, w2 = Th[0], Th[1], Th[2]
     c, a, b = _so3_coef(chart, w0 * w0 + w1 * w1 + w2 * w2)
-    # (if/else, each branch whole: with only the rows 1, 2 under an ``if``, numba keeps the reference counting)
-    if mode == 1:
-        out[0], out[1], out[2] = _rotate3(c, -a, b, w0, w1, w2, G[0], G[1], G[2])
-    else:
-        out[0], out[1], out[2] = _rotate3(c, -a, b, w0, w1, w2, G[0], G[1], G[2])
-        out[3], out[4], out[5] = _rotate3(c, -a, b, w0, w1, w2, G[3], G[4], G[5])
-        out[6], out[7], out[8] = _rotate3(c, -a, b, w0, w1, w2, G[6], G[7], G[8])
+    w = (w0, w1, w2)
+    out[0], out[1], out[2] = _so3_lin_c(c, -a, b, w, (G[0], G[1], G[2]))
+    if mode != 1:
+        out[3], out[4], out[5] = _so3_lin_c(c, -a, b, w, (G[3], G[4], G[5]))
+        out[6], out[7], out[8] = _so3_lin_c(c, -a, b, w, (G[6], G[7], G[8]))
 
 
 @_jit
@@ -513,22 +503,16 @@ def _lowrank_update(kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs
 
 
 # ====================================================================================== the state's error
-@_jit_inline
-def _cross3(u0, u1, u2, v0, v1, v2):
-    """u × v as three scalars."""
-    return u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
-
-
 @_jit
 def _so3_state(mode, G1, Ea, out):
     """``hat(e) Gamma1 = e × Gamma1`` (mode gamma) or ``g1 hat(e)``, whose row i is ``g1_i × e`` (mode g)."""
-    e0, e1, e2 = Ea[0], Ea[1], Ea[2]
-    if mode == 1:
-        out[0], out[1], out[2] = _cross3(e0, e1, e2, G1[0], G1[1], G1[2])
+    e = (Ea[0], Ea[1], Ea[2])
+    if mode == 1:  # (the cross product as groups' c v + a w × v + b (w·v) w with c = b = 0, a = 1)
+        out[0], out[1], out[2] = _so3_lin_c(0.0, 1.0, 0.0, e, (G1[0], G1[1], G1[2]))
     else:
-        out[0], out[1], out[2] = _cross3(G1[0], G1[1], G1[2], e0, e1, e2)
-        out[3], out[4], out[5] = _cross3(G1[3], G1[4], G1[5], e0, e1, e2)
-        out[6], out[7], out[8] = _cross3(G1[6], G1[7], G1[8], e0, e1, e2)
+        out[0], out[1], out[2] = _so3_lin_c(0.0, 1.0, 0.0, (G1[0], G1[1], G1[2]), e)
+        out[3], out[4], out[5] = _so3_lin_c(0.0, 1.0, 0.0, (G1[3], G1[4], G1[5]), e)
+        out[6], out[7], out[8] = _so3_lin_c(0.0, 1.0, 0.0, (G1[6], G1[7], G1[8]), e)
 
 
 @_jit

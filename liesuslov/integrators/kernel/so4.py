@@ -33,6 +33,7 @@ for _fn in (_g3._sq, _g3._so3_lin_c, _g3._rodrigues_fast, _g4._so4_pq_entries, _
     register_jitable(_fn)
 del _fn
 
+_so3_lin_c = _g3._so3_lin_c
 _so4_cayley_coefficients = _g4._so4_cayley_coefficients
 _so4_dcayinv_c = _g4._so4_dcayinv_c
 _so4_dexpinv_c = _g4._so4_dexpinv_c
