@@ -345,6 +345,25 @@ def _random_spd(d, rng):
     return A @ A.T + 0.5 * np.eye(d)
 
 
+@pytest.mark.parametrize("n", [3, 5, 17])  # so(17): d = 136, beyond the residual projector (the basis path)
+def test_contains_one_vector_agrees_with_the_batch_at_the_tolerance(n):
+    """One vector (the residual projector I - B^T B, or the basis when d is large) and a batch (the basis)
+    give the same answer, also for points just inside and just outside the tolerance."""
+    alg = ls.so(n)
+    rng = np.random.default_rng(n)
+    S = _random_subspace(alg, alg.dim // 2, rng)
+    inside = S.project(rng.standard_normal((4, alg.dim))) * np.array([[1.0], [1e-3], [1e3], [0.0]])
+    normal = S.complement().basis[0]
+    tol = 1e-6
+    scale = np.maximum(1.0, np.linalg.norm(inside, axis=1))[:, None]
+    pts = np.concatenate([inside, inside + 0.5 * tol * scale * normal, inside + 2.0 * tol * scale * normal])
+    want = np.array([True] * 8 + [False] * 4)
+    np.testing.assert_array_equal(S.contains(pts, tol), want)
+    one = np.array([S.contains(p, tol) for p in pts])
+    np.testing.assert_array_equal(one, want)
+    assert all(isinstance(S.contains(p, tol), np.bool_) for p in pts[:2])
+
+
 @SETTINGS
 @given(name=st.sampled_from(sorted(ALGEBRAS)), seed=st.integers(0, 2**32 - 1), data=st.data())
 def test_projectors_idempotent_and_self_adjoint(name, seed, data):

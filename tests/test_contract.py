@@ -614,6 +614,23 @@ def test_errors_name_the_argument():
         ls.to_spherical_pendulum(np.eye(4), np.ones((4, 4)))
 
 
+@pytest.mark.parametrize("size", [1, 3, 32, 33, 500])  # Python floats up to 32 entries, the ufunc beyond
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_one_non_finite_entry_anywhere_is_found(size, bad):
+    from liesuslov._validation import all_finite, as_float_array
+
+    rng = np.random.default_rng(size)
+    for shape in ((size,), (size, 1)):
+        a = rng.standard_normal(shape) * 1e300  # large finite entries: no overflow in the test itself
+        assert all_finite(a)
+        for pos in {0, size // 2, size - 1}:
+            b = a.copy()
+            b.flat[pos] = bad
+            assert not all_finite(b)
+            with pytest.raises(ValueError, match="Omega0 contains NaN or infinite"):
+                as_float_array(b, "Omega0")
+
+
 # ======================================================================================== references: (a) free body
 
 

@@ -16,6 +16,8 @@ from .lie import LieAlgebra
 __all__ = ["Subspace", "is_symmetric_pair", "suslov_distribution"]
 
 _RANK_TOL = 1e-10
+#: Largest dimension d for which :meth:`Subspace.contains` keeps the (d, d) residual projector.
+_PROJECTOR_MAX_DIM = 128
 
 
 class Subspace:
@@ -103,13 +105,28 @@ class Subspace:
     def contains(self, x, tol: float | None = None) -> np.ndarray:
         """Membership test ``|x - P x| <= tol * max(1, |x|)``, batched: (..., d) -> bool (...).
 
-        Through the basis (O(k d), not the d - k covectors: d - k ~ d^2/2 on so(n) with Fedorov–Kozlov
-        constraints), with squared norms on both sides (the front door tests every Omega0).
+        The residual ``r = x - P x`` through the complement's projector ``I - B^T B`` (d, d) when d <=
+        :data:`_PROJECTOR_MAX_DIM` (one matrix-vector product: the front door tests every Omega0), else
+        through the basis (O(k d), not the d - k covectors: d - k ~ d^2/2 on so(n) with Fedorov–Kozlov
+        constraints); squared norms on both sides.
         """
         x = np.asarray(x, dtype=float)
         tol = self.tol * 10 if tol is None else tol
+        bound = tol * tol
+        if x.ndim == 1 and x.shape[0] <= _PROJECTOR_MAX_DIM:  # (Python floats: ~3 µs, the batch form ~8 µs)
+            r = self._residual_projector() @ x
+            return np.bool_(float(r @ r) <= bound * max(1.0, float(x @ x)))
         r = x - (x @ self.basis.T) @ self.basis
-        return np.add.reduce(r * r, axis=-1) <= tol * tol * np.maximum(1.0, np.add.reduce(x * x, axis=-1))
+        return np.add.reduce(r * r, axis=-1) <= bound * np.maximum(1.0, np.add.reduce(x * x, axis=-1))
+
+    def _residual_projector(self) -> np.ndarray:
+        """``I - B^T B`` (d, d), kept: ``x - P x`` for the orthonormal basis rows B."""
+        R = self.__dict__.get("_residual")
+        if R is None:
+            d = self.algebra.dim
+            R = self._residual = np.eye(d) - self.basis.T @ self.basis
+            R.setflags(write=False)
+        return R
 
     def complement(self) -> Subspace:
         """The orthogonal complement for the pairing (the span of the constraint covectors)."""

