@@ -486,6 +486,13 @@ def test_the_cache_is_stamped_with_every_kernel_source(tmp_path):
     names = {(p.parent.name, p.name) for p in common.KERNEL_SOURCES}
     assert {("kernel", "loop.py"), ("kernel", "group.py"), ("groups", "so3.py"), ("groups", "so4.py"),
             ("integrators", "control.py")} <= names
+    assert not names & {("kernel", "wrapper.py"), ("kernel", "warm.py")}  # Python only: no compiled code
+    import numba
+
+    for name in ("wrapper", "warm"):  # (so leaving them out cannot serve a stale compiled function)
+        mod = __import__(f"liesuslov.integrators.kernel.{name}", fromlist=[name])
+        assert not [v for v in vars(mod).values() if isinstance(v, numba.core.dispatcher.Dispatcher)
+                    and v.py_func.__module__ == mod.__name__]
     for fn in (loop._solve_one, common._accept_factor):
         assert fn._cache._cache_file._source_stamp == common.sources_stamp(common.KERNEL_SOURCES)
     a, b = tmp_path / "a.py", tmp_path / "b.py"

@@ -12,11 +12,11 @@ trajectory's numbers do not depend on its batch mates or the chunking (no reduct
 the same code path for B = 1 and B > 1).
 
 Specialisations: one loop per *family* of kinds (:data:`~.common.FAMILIES`), the family a numba literal —
-the closed forms (so3, so4, and no group part) and the matrix algorithms (dense, lowrank) — so a scene
-compiles only its family's group code; the kind inside a family, the chart, the mode and every size are
-run-time values (one int64 and one float64 parameter array carry the scene), so no other scene compiles
-again. :mod:`.warm` compiles both families in parallel processes (``python -m
-liesuslov.integrators.kernel.warm``; the test session does it first).
+no group part (xi alone: ~20 s to compile, half the closed forms'), the closed forms (so3, so4) and the
+matrix algorithms (dense, lowrank) — so a scene compiles only its family's group code; the kind inside a
+family, the chart, the mode and every size are run-time values (one int64 and one float64 parameter array
+carry the scene), so no other scene compiles again. :mod:`.warm` compiles the families in parallel processes
+(``python -m liesuslov.integrators.kernel.warm``; the test session does it first).
 
 Calls that LLVM does not inline pass every array argument field by field, so the small functions of each
 stage are inlined at numba IR level (:func:`~.common._jit_inline`: the polynomial field, the so(3) Omega and
@@ -43,8 +43,8 @@ with reconstruction 3.0 -> 2.2 µs per step; Fedorov–Kozlov low rank n = 64 40
 
 The on-disk cache: numba stamps a cached function with its own file, but a compiled caller embeds its
 callees' code; every function here is stamped with the contents of all the kernel's sources
-(:data:`~.common.KERNEL_SOURCES`: this package, ``control.py`` and ``groups/``), so a change in any of
-them recompiles (:class:`~.common._KernelCache`).
+(:data:`~.common.KERNEL_SOURCES`: this package but its Python side — ``wrapper``, ``warm`` —, ``control.py``
+and ``groups/``), so a change in any of them recompiles (:class:`~.common._KernelCache`).
 
 Cost (2-core machine shared with other work, 2026-11-24): the first compiled call on an empty cache compiles
 its family: ~30 s for the closed forms, ~70–80 s for the matrix family (whose time is mostly LLVM: numba

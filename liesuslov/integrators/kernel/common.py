@@ -16,9 +16,9 @@ from ... import groups
 from .. import control
 
 KINDS = {None: 0, "so3": 1, "dense": 2, "lowrank": 3, "so4": 4}
-#: The family each kind compiles in (one loop per family, the kind a run-time value within it): 1 the closed
-#: forms (so3, so4, and no group part), 2 the matrix algorithms (dense, lowrank).
-FAMILIES = {0: 1, 1: 1, 4: 1, 2: 2, 3: 2}
+#: The family each kind compiles in (one loop per family, the kind a run-time value within it): 0 no group part
+#: (xi alone), 1 the closed forms (so3, so4), 2 the matrix algorithms (dense, lowrank).
+FAMILIES = {0: 0, 1: 1, 4: 1, 2: 2, 3: 2}
 MODES = {"none": 0, "gamma": 1, "g": 2}
 CHARTS = {"exp": 0, "cayley": 1, None: 0}
 #: Fedorov–Kozlov models from this n on run the low-rank kind (below, dense m×m work is as cheap).
@@ -40,8 +40,11 @@ def sources_stamp(paths) -> bytes:
 
 
 _PACKAGE = Path(__file__).resolve().parents[2]
+#: The Python side of the kernel package: no compiled code (a change there does not make the cache stale).
+_PYTHON_ONLY = ("__init__.py", "wrapper.py", "warm.py")
 #: Every source file whose code is compiled into the kernel's functions.
-KERNEL_SOURCES = tuple(sorted([*(_PACKAGE / "integrators" / "kernel").glob("*.py"),
+KERNEL_SOURCES = tuple(sorted([*(p for p in (_PACKAGE / "integrators" / "kernel").glob("*.py")
+                                 if p.name not in _PYTHON_ONLY),
                                _PACKAGE / "integrators" / "control.py", *(_PACKAGE / "groups").glob("*.py")]))
 _STAMP = sources_stamp(KERNEL_SOURCES)
 

@@ -9,7 +9,8 @@ as a literal, :data:`.common.FAMILIES`), and the kind itself as a run-time value
 registers, for each stub and family, a function with the stub's signature (inlined where the stub is
 called) that branches on the kind and calls the kind's implementation — with every argument for the
 matrix kinds, with only what they read for the closed forms: a family's loop therefore compiles its own
-group code only — the closed-form loop (so3, so4) none of the matrix algorithms. Adding a kind is one
+group code only — the closed-form loop (so3, so4) none of the matrix algorithms, the loop of a scene without
+a group part (family 0) typed no-ops. Adding a kind is one
 implementation per operation and one entry in each table at the end of this module.
 """
 
@@ -198,6 +199,32 @@ def _state_closed(so3, so4):
         else:
             so4(mode, G1, Ea, out)
     return impl
+
+
+# Family 0 (no group part: mode "none", the loop advances xi alone): the loop calls none of the operations
+# at run time; these typed no-ops let its code compile without any group code.
+def _omega_none(family, kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
+    return nc
+
+
+def _sq_none(family, kind, Th):
+    return 0.0
+
+
+def _dinv_none(family, kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
+    return None
+
+
+def _act_none(family, kind, chart, skew, Th, sign, v, out, Wf, vbf, Q, nc, r, bufs):
+    return None
+
+
+def _update_none(family, kind, chart, skew, mode, G, Th, out, Wf, vbf, Q, nc, r, bufs, PQ, PQ2):
+    return None
+
+
+def _state_none(family, kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
+    return None
 
 
 def _by_kind(stub, table: dict) -> None:
@@ -549,10 +576,13 @@ def _lowrank_state(kind, mode, G1, Ea, out, Q, nc, r, bufs, PQ, PQ2):
 
 
 # ============================================================================ the tables (codes: common.KINDS)
-# family 1 (closed forms): so3, so4 (and mode "none", which calls none of these); family 2 (matrices): dense, lowrank
-_by_kind(_omega_alg, {1: _omega_closed(_so3_omega, _so4_omega), 2: _omega_by(2, _dense_omega, _lowrank_omega)})
-_by_kind(_alg_sq, {1: _sq_by(1, _so3_sq, _so4_sq), 2: _sq_by(2, _matrix_sq, _matrix_sq)})
-_by_kind(_alg_dinv, {1: _dinv_closed(_so3_dinv, _so4_dinv), 2: _dinv_by(2, _dense_dinv, _lowrank_dinv)})
-_by_kind(_alg_act, {1: _act_closed(_so3_rotate, _so4_rotate), 2: _act_by(2, _dense_act, _lowrank_act)})
-_by_kind(_alg_update, {1: _update_closed(_so3_update, _so4_update), 2: _update_by(2, _dense_update, _lowrank_update)})
-_by_kind(_alg_state, {1: _state_closed(_so3_state, _so4_state), 2: _state_by(2, _dense_state, _lowrank_state)})
+# family 0: no group part (mode "none"); family 1 (closed forms): so3, so4; family 2 (matrices): dense, lowrank
+_by_kind(_omega_alg, {0: _omega_none, 1: _omega_closed(_so3_omega, _so4_omega),
+                      2: _omega_by(2, _dense_omega, _lowrank_omega)})
+_by_kind(_alg_sq, {0: _sq_none, 1: _sq_by(1, _so3_sq, _so4_sq), 2: _sq_by(2, _matrix_sq, _matrix_sq)})
+_by_kind(_alg_dinv, {0: _dinv_none, 1: _dinv_closed(_so3_dinv, _so4_dinv), 2: _dinv_by(2, _dense_dinv, _lowrank_dinv)})
+_by_kind(_alg_act, {0: _act_none, 1: _act_closed(_so3_rotate, _so4_rotate), 2: _act_by(2, _dense_act, _lowrank_act)})
+_by_kind(_alg_update, {0: _update_none, 1: _update_closed(_so3_update, _so4_update),
+                       2: _update_by(2, _dense_update, _lowrank_update)})
+_by_kind(_alg_state, {0: _state_none, 1: _state_closed(_so3_state, _so4_state),
+                      2: _state_by(2, _dense_state, _lowrank_state)})

@@ -1,13 +1,13 @@
 """Compile the kernel ahead of use: its loops into numba's on-disk cache, several at once.
 
-The compiled loop is specialised per family of kinds (:data:`~.common.FAMILIES`: the closed forms so3 and
-so4, and the matrix algorithms dense and lowrank): the first run of a family on a machine compiles it
-(~30 s for the closed forms, ~70–80 s for the matrices, on a 2-core machine; numba compiles one function at
-a time, under a lock), later processes load it from the cache (< 1 s). :func:`compile_kinds` compiles them in
-parallel processes — one per core — so a cluster node, a container image or a test session pays that once, in
-the wall time of the slowest rather than the sum::
+The compiled loop is specialised per family of kinds (:data:`~.common.FAMILIES`: no group part, the closed
+forms so3 and so4, and the matrix algorithms dense and lowrank): the first run of a family on a machine
+compiles it (~20 s with no group part, ~30–40 s for the closed forms, ~70–90 s for the matrices, on a 2-core
+machine; numba compiles one function at a time, under a lock), later processes load it from the cache
+(< 1 s). :func:`compile_kinds` compiles them in parallel processes — one per core — so a cluster node, a
+container image or a test session pays that once, in the wall time of the slowest rather than the sum::
 
-    python -m liesuslov.integrators.kernel.warm            # both families (so3 and dense)
+    python -m liesuslov.integrators.kernel.warm            # every family (dense, so3 and none)
     python -m liesuslov.integrators.kernel.warm so4        # the family of one kind
 
 Each process runs one short integration of its kind through the front door (so exactly what a user's
@@ -24,8 +24,9 @@ import tempfile
 import time
 
 #: The kinds and, for each, the (n, reconstruct, constraints) of a scene that runs it.
-#: One kind of each family compiles the family: the default of :func:`compile_kinds`.
-FAMILY_KINDS = ("so3", "dense")
+#: One kind of each family compiles the family: the default of :func:`compile_kinds`, the longest first (the
+#: other two then share the second core while it compiles).
+FAMILY_KINDS = ("dense", "so3", "none")
 KIND_SCENES = {
     "none": (3, False, "none"),
     "so3": (3, True, "none"),
