@@ -543,6 +543,25 @@ def test_fedorov_kozlov_model_never_builds_K():
     assert "matrix" not in J.__dict__ and "inverse_matrix" not in J.__dict__
 
 
+
+@pytest.mark.parametrize("n", [3, 6, 40])
+def test_fedorov_kozlov_coordinate_maps_are_the_plane_rotations_e_in(n):
+    """omega_coords puts xi_i at the coordinate of E_in and exact zeros elsewhere, for any batch axes;
+    xi_from_coords reads them back (the two maps of the Fedorov–Kozlov model, against the algebra's index)."""
+    s = SuslovSystem(Inertia.from_mass_tensor(np.linspace(1.0, 2.0, n)), constraints="fedorov_kozlov")
+    m = s.model()
+    alg = s.algebra
+    k = n - 1
+    xi = np.random.default_rng(n).standard_normal((2, 3, k))
+    x = m.omega_coords(xi)
+    want = np.zeros((2, 3, alg.dim))
+    for i in range(k):
+        want[..., alg.index(i, n - 1)] = xi[..., i]
+    np.testing.assert_array_equal(x, want)
+    np.testing.assert_array_equal(m.xi_from_coords(x), xi)
+    np.testing.assert_array_equal(m.omega_coords(xi[0, 0]), want[0, 0])  # one vector
+    np.testing.assert_array_equal(m.xi_from_coords(list(want[0, 0])), xi[0, 0])  # array_like
+
 # ---------------------------------------------------------------------- pickling (issue 12)
 def _cube_V(G):
     return G[..., 0] ** 3

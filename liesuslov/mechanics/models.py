@@ -191,10 +191,14 @@ def _fk_maps(system: SuslovSystem) -> dict:
             X[..., m, :m] = -xi
             return X
 
+    # x_j = xi_i at j = idx[i], 0 elsewhere: a take from (xi, 0) (~0.5 µs less than x[..., idx] = xi)
+    from_padded = np.full(d, m)
+    from_padded[idx] = np.arange(m)
+
     def omega_coords(xi):
-        x = np.zeros(xi.shape[:-1] + (d,))
-        x.reshape(-1, d)[:, idx] = np.reshape(xi, (-1, m))  # (a view of x: ~1.5 µs less than x[..., idx] = xi)
-        return x
+        padded = np.zeros(xi.shape[:-1] + (m + 1,))
+        padded[..., :m] = xi
+        return padded.take(from_padded, axis=-1)
 
     def xi_from_coords(x):
         return np.asarray(x).take(idx, axis=-1)  # (x[..., idx] is ~1.5 µs slower on one vector)
