@@ -36,7 +36,12 @@ does not count), the matrix kinds view their flat scratch as matrices the same w
 straight-line code on scalars. Borrowing is kept to arrays passed *into* compiled calls: borrowed views
 written by code inlined at IR level into the loop (the stage's field and dexp⁻¹) gave wrong numbers at the
 continuous extension's stages in one test (not understood; reverted), so the loop's own code only reads
-and writes the owners. Measured (interleaved processes, same machine):
+and writes the owners. A lead, not confirmed: numba's IR releases a variable right after its last use (``v =
+_borrow(a)`` is followed by ``del a``), so a borrowed view is safe only while its owner is still used later —
+true of the arrays passed into a call, not of a temporary owner inside IR-inlined code (a small reproducer of
+that did not show wrong values). One scratch allocation for the loop's ~35 work arrays (slices of it) was
+tried too: one allocation less per array, but LLVM no longer knew they do not alias — an so(3) step ~13%
+slower, reverted. Measured (interleaved processes, same machine):
 the Kharlamova scene's compiled solve (dense SO(5), Cayley, 16 RKMK8 steps) 232 -> 165 µs; dense SO(5) RKMK4
 with reconstruction 3.0 -> 2.2 µs per step; Fedorov–Kozlov low rank n = 64 40 -> 34 µs per step; so(3)
 ~3% per step.
