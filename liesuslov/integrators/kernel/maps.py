@@ -390,18 +390,23 @@ def _mat_dinv(chart, skew, Th, A, out, W, bern):
         return
     M, P = W[0], W[1]
     _mm(Th, A, P)
+    if skew:
+        # Th, A skew: P^T = A Th and P Th = Th A Th is skew, so the result is A + (P - P^T)/2 - (P Th)/4,
+        # skew by construction: its upper triangle only (n^2 (n - 1)/2 products instead of a second n^3)
+        for i in range(n):
+            out[i, i] = 0.0
+            for j in range(i + 1, n):
+                acc = 0.0
+                for p in range(n):
+                    acc += P[i, p] * Th[p, j]
+                v = A[i, j] + 0.5 * (P[i, j] - P[j, i]) - 0.25 * acc
+                out[i, j] = v
+                out[j, i] = -v
+        return
     for i in range(n):
         for j in range(n):
             M[i, j] = A[i, j] + 0.5 * P[i, j]
     _mm(M, Th, P)
-    if skew:
-        for i in range(n):
-            out[i, i] = 0.0
-            for j in range(i + 1, n):
-                v = 0.5 * ((M[i, j] - 0.5 * P[i, j]) - (M[j, i] - 0.5 * P[j, i]))
-                out[i, j] = v
-                out[j, i] = -v
-    else:
-        for i in range(n):
-            for j in range(n):
-                out[i, j] = M[i, j] - 0.5 * P[i, j]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = M[i, j] - 0.5 * P[i, j]
