@@ -272,11 +272,8 @@ def _so3_omega(skew, x, widx, wval, Om, out):
 
 @_jit
 def _dense_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
-    _omega_matrix(skew, x, widx, wval, Om)
     n = Om.shape[0]
-    for i in range(n):
-        for j in range(n):
-            out[i * n + j] = Om[i, j]
+    _omega_matrix(skew, x, widx, wval, _view(out, 0, (n, n)))  # out: the (n, n) matrix, row major
     return nc
 
 
