@@ -59,7 +59,8 @@ _field_call = _jit(_field.py_func)
 # coordinates in the step's basis Q), so4 6 numbers (p, q); see the package docstring.
 def _omega_alg(family, kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
     """out = Omega(x) in the kind's layout; returns the number of basis columns (low rank: adds column
-    ``nc`` to Q, Gram–Schmidt twice; the other kinds return nc unchanged)."""
+    ``nc`` to Q, Gram–Schmidt twice; the other kinds return nc unchanged). Om (1, n): the low-rank kind's
+    scratch row (the other kinds write out directly and leave it alone)."""
 
 
 def _alg_sq(family, kind, Th):
@@ -272,7 +273,7 @@ def _so3_omega(skew, x, widx, wval, Om, out):
 
 @_jit
 def _dense_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
-    n = Om.shape[0]
+    n = int(math.sqrt(out.shape[0]) + 0.5)
     _omega_matrix(skew, x, widx, wval, _view(out, 0, (n, n)))  # out: the (n, n) matrix, row major
     return nc
 

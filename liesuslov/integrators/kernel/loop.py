@@ -154,7 +154,7 @@ def _crossings(gold, gnew, at_start, ev_dir, act_e):
 
 @_jit
 def _state_at(family, kind, chart, skew, mode, th, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb, Q, nc, r, bufs,
-                 PQ, PQ2):
+              PQ, PQ2):
     """The state at theta of the step on the continuous extension: ``xit`` and ``Gt`` (g phi(Theta(theta))
     or phi(-Theta(theta)) Gamma)."""
     _dense_at(th, dense, wts, xi, hL, hK, xit, Tht)
@@ -344,7 +344,7 @@ def _locate(family, kind, chart, skew, mode, bi, n_act, act_e, act_th, gold, gne
                 Gt[c] = G1[c]
         else:
             _state_at(family, kind, chart, skew, mode, th_, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb, Q, nc, r,
-                         bufs, PQ, PQ2)
+                      bufs, PQ, PQ2)
         cnt = ev_count[bi, e]
         if cnt < cap:
             ev_t[bi, e, cnt] = te
@@ -377,7 +377,7 @@ def _outputs(family, kind, chart, skew, mode, bi, ie, t_eval, t_lim, t, h, t_new
                 G_out[ie, bi, c] = G1[c]
         else:
             _state_at(family, kind, chart, skew, mode, (te - t) / h, dense, wts, xi, G, hL, hK, xit, Tht, Gt, W, vb,
-                         Q, nc, r, bufs, PQ, PQ2)
+                      Q, nc, r, bufs, PQ, PQ2)
             for c in range(k):
                 xi_out[ie, bi, c] = xit[c]
             if mode != 0:
@@ -512,7 +512,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
     Gam0 = np.zeros(n)
     Gam = np.zeros(n)
     z = np.zeros(k + n)
-    Om = np.zeros((m if kind != 3 else 1, m))
+    Om = np.zeros((1 if kind == 3 else 0, m))  # the low-rank kind's scratch row (see group._omega_alg)
     W = np.zeros(12 * mm * mm)  # flat: viewed as (12, n, n) for the size at hand (group._scratch)
     vb = np.zeros(mm)
     bufs = np.zeros((3, max(mm * mm, 1)))
