@@ -558,6 +558,10 @@ def test_fedorov_kozlov_coordinate_maps_are_the_plane_rotations_e_in(n):
     for i in range(k):
         want[..., alg.index(i, n - 1)] = xi[..., i]
     np.testing.assert_array_equal(x, want)
+    ref = np.zeros((2, 3, n, n))  # Omega = u e_n^T - e_n u^T, built here from the definition
+    ref[..., :k, n - 1] = xi
+    ref[..., n - 1, :k] = -xi
+    np.testing.assert_array_equal(alg.hat(x), ref)
     np.testing.assert_array_equal(m.xi_from_coords(x), xi)
     np.testing.assert_array_equal(m.omega_coords(xi[0, 0]), want[0, 0])  # one vector
     np.testing.assert_array_equal(m.xi_from_coords(list(want[0, 0])), xi[0, 0])  # array_like
