@@ -60,6 +60,9 @@ def as_float_array(x: Any, name: str, *, ndim_min: int = 0, tail: tuple[int, ...
 
 #: Largest array whose finiteness :func:`all_finite` tests on Python floats.
 _SMALL = 32
+#: Longest vector whose squared norm numpy's reduction sums one entry after the other (from 8 entries on it
+#: sums eight partial sums): up to this length a sum on Python floats is bitwise numpy's.
+_SEQUENTIAL_MAX = 7
 
 
 def all_finite(arr: np.ndarray) -> bool:
@@ -138,6 +141,17 @@ def unit_vectors(x: np.ndarray, name: str, *, tol: float = 1e-8) -> np.ndarray:
 
     The division removes the rounding of the given data, so unit vectors stay unit to 1e-16.
     """
+    if x.ndim == 1 and x.size <= _SEQUENTIAL_MAX:
+        # one short vector on Python floats (~5 µs less per call): the same squares summed in the same order
+        # as numpy's reduction of fewer than 8 entries, so its norm is bitwise the batch path's (tested)
+        acc = 0.0
+        for v in x.tolist():
+            acc += v * v
+        nrm = math.sqrt(acc)
+        if x.size and not abs(nrm - 1.0) <= tol:
+            raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got |{name}| = "
+                             f"{nrm:.6g}: pass {name} / |{name}|")
+        return x / nrm
     nrm = np.sqrt(np.add.reduce(x * x, axis=-1))  # np.linalg.norm's own formula, without its ~4 µs of checks
     if nrm.ndim == 0:  # one vector: the same test and division on the Python float (~4 µs less per call)
         if x.size and not abs(float(nrm) - 1.0) <= tol:

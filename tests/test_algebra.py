@@ -364,6 +364,34 @@ def test_contains_one_vector_agrees_with_the_batch_at_the_tolerance(n):
     assert all(isinstance(S.contains(p, tol), np.bool_) for p in pts[:2])
 
 
+@pytest.mark.parametrize("n", [3, 5, 8, 9])  # so(9): d = 36, beyond the Python-float path (the projector)
+def test_contains_one_vector_of_a_coordinate_subspace_agrees_with_the_batch(n):
+    """A coordinate subspace (signed axes, in any order): one vector (its entries off D's axes, on Python
+    floats up to d = 32) and a batch (the basis) give the same answer at the tolerance; a rotated copy of
+    the same subspace is not a coordinate one and takes the projector."""
+    alg = ls.so(n)
+    d = alg.dim
+    rng = np.random.default_rng(100 + n)
+    axes = rng.permutation(d)[: d // 2]
+    rows = np.zeros((axes.size, d))
+    rows[np.arange(axes.size), axes] = rng.choice([-1.0, 1.0], axes.size)
+    S = Subspace(alg, rows)
+    off = tuple(sorted(set(range(d)) - set(axes.tolist())))
+    assert S._outside_axes() == off
+    Q = np.linalg.qr(rng.standard_normal((d, d)))[0]
+    assert Subspace(alg, rows @ Q)._outside_axes() is None
+    inside = S.project(rng.standard_normal((4, d))) * np.array([[1.0], [1e-3], [1e3], [0.0]])
+    normal = np.zeros(d)
+    normal[off[0]] = 1.0
+    tol = 1e-6
+    scale = np.maximum(1.0, np.linalg.norm(inside, axis=1))[:, None]
+    pts = np.concatenate([inside, inside + 0.5 * tol * scale * normal, inside + 2.0 * tol * scale * normal])
+    want = np.array([True] * 8 + [False] * 4)
+    np.testing.assert_array_equal(S.contains(pts, tol), want)
+    np.testing.assert_array_equal(np.array([S.contains(p, tol) for p in pts]), want)
+    assert not S.contains(np.full(d, np.nan)) and isinstance(S.contains(pts[0], tol), np.bool_)
+
+
 @SETTINGS
 @given(name=st.sampled_from(sorted(ALGEBRAS)), seed=st.integers(0, 2**32 - 1), data=st.data())
 def test_projectors_idempotent_and_self_adjoint(name, seed, data):

@@ -631,6 +631,27 @@ def test_one_non_finite_entry_anywhere_is_found(size, bad):
                 as_float_array(b, "Omega0")
 
 
+@pytest.mark.parametrize("n", range(1, 10))  # Python floats up to 7 entries, numpy's reduction beyond
+def test_unit_vectors_of_one_vector_is_bitwise_a_row_of_the_batch(n):
+    """One vector (a sum on Python floats up to 7 entries) normalised exactly as the same vector in a batch
+    (numpy's reduction): a trajectory's Gamma0, hence its whole run, does not depend on its batch mates; a
+    vector off the unit sphere is rejected on both paths, with its norm."""
+    from liesuslov._validation import unit_vectors
+
+    rng = np.random.default_rng(40 + n)
+    X = rng.standard_normal((300, n))
+    X /= np.linalg.norm(X, axis=1, keepdims=True)
+    X *= 1.0 + rng.uniform(-5e-9, 5e-9, (300, 1))  # within the tolerance, not exactly unit
+    batch = unit_vectors(X, "Gamma0")
+    for x, row in zip(X, batch, strict=True):
+        one = unit_vectors(x, "Gamma0")
+        assert one.shape == (n,) and np.array_equal(one, row)
+    for bad in (2.0 * X[:1], np.full((1, n), np.nan)):
+        for arg in (bad, bad[0]):
+            with pytest.raises(ValueError, match="Gamma0 must be a unit vector"):
+                unit_vectors(arg, "Gamma0")
+
+
 # ======================================================================================== references: (a) free body
 
 
