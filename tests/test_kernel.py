@@ -6,6 +6,8 @@ The first test compiles the kernel (cached on disk after that).
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -513,12 +515,81 @@ def test_the_first_compilation_prints_no_numba_warning(tmp_path):
     import subprocess
     import sys
 
+    from liesuslov.integrators.kernel.warm import COMPILE_HERE_ENV
+
     script = ("import warnings, numba.core.errors as e; warnings.simplefilter('error', e.NumbaWarning); "
               "from liesuslov.integrators.kernel.warm import run_kind; print(run_kind('so4'))")
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    # compiled in this very process (where the warnings are errors), not in a child of it
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), COMPILE_HERE_ENV: "1"}
     res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=900,
                          check=False)
     assert res.returncode == 0 and res.stdout.strip() == "numba", res.stderr[-2000:]
+
+
+def test_a_family_missing_from_the_cache_is_compiled_in_a_child_process(monkeypatch):
+    """_compiled compiles a family that numba's cache lacks in a child (compile_kinds, whose children get
+    COMPILE_HERE_ENV and this package's root on PYTHONPATH), not when the cache has it, never from inside such
+    a child (no recursion), and leaves it to this process when the child fails."""
+    import subprocess
+    from pathlib import Path
+
+    from liesuslov.integrators.kernel import common, warm, wrapper
+
+    calls = []
+    monkeypatch.setattr(wrapper, "compile_kinds", lambda kinds, processes=None: calls.append((kinds, processes)))
+    monkeypatch.setattr(wrapper._solve_one._cache, "load_overload", lambda sig, ctx: None)  # a cache miss
+    monkeypatch.delenv(warm.COMPILE_HERE_ENV, raising=False)
+    wrapper._compile_apart(2, ())
+    wrapper._compile_apart(0, ())
+    assert calls == [(["dense"], 1), (["none"], 1)]
+    monkeypatch.setenv(warm.COMPILE_HERE_ENV, "1")  # inside a child: compile here
+    wrapper._compile_apart(1, ())
+    monkeypatch.setattr(wrapper._solve_one._cache, "load_overload", lambda sig, ctx: object())  # a cache hit
+    monkeypatch.delenv(warm.COMPILE_HERE_ENV)
+    wrapper._compile_apart(1, ())
+    assert len(calls) == 2
+
+    def failing(kinds, processes=None):
+        raise RuntimeError("compiling kind 'so3' failed: no space left")
+    monkeypatch.setattr(wrapper, "compile_kinds", failing)
+    monkeypatch.setattr(wrapper._solve_one._cache, "load_overload", lambda sig, ctx: None)
+    wrapper._compile_apart(1, ())  # no exception: the caller compiles
+
+    seen = {}
+
+    class Done:
+        returncode = 0
+
+        def __init__(self, cmd, **kw):
+            seen.update(kw["env"])
+
+        def poll(self):
+            return 0
+
+    monkeypatch.setattr(subprocess, "Popen", Done)
+    monkeypatch.setenv("PYTHONPATH", "/elsewhere")
+    warm.compile_kinds(["none"], processes=1)
+    root = str(Path(warm.__file__).resolve().parents[3])
+    assert seen[warm.COMPILE_HERE_ENV] == "1" and seen["PYTHONPATH"].split(os.pathsep) == [root, "/elsewhere"]
+    assert set(warm.FAMILY_KIND.values()) == set(warm.FAMILY_KINDS)
+    for family, kind in warm.FAMILY_KIND.items():  # each family compiled by a kind of that family
+        assert common.FAMILIES[common.KINDS[None if kind == "none" else kind]] == family
+
+
+@pytest.mark.slow
+def test_a_first_call_loads_its_family_compiled_apart(tmp_path):
+    """On an empty cache a first call compiles its family in a child and loads it: the calling process's loop
+    is a cache hit, not a compilation of its own."""
+    import subprocess
+    import sys
+
+    script = ("from liesuslov.integrators.kernel.warm import run_kind; from liesuslov.integrators.kernel import loop; "
+              "b = run_kind('none'); s = loop._solve_one.stats; print(b, len(s.cache_hits), len(s.cache_misses))")
+    env = {k: v for k, v in os.environ.items() if k != "LIESUSLOV_KERNEL_COMPILE_HERE"}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path)
+    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=900,
+                         check=False)
+    assert res.returncode == 0 and res.stdout.split() == ["numba", "1", "0"], (res.stdout, res.stderr[-2000:])
 
 
 def test_per_model_caches_follow_every_setting():

@@ -52,7 +52,10 @@ callees' code; every function here is stamped with the contents of all the kerne
 and ``groups/``), so a change in any of them recompiles (:class:`~.common._KernelCache`).
 
 Cost (2-core machine shared with other work, 2026-11-24): the first compiled call on an empty cache compiles
-its family: ~30 s for the closed forms, ~70–80 s for the matrix family (whose time is mostly LLVM: numba
+its family (in a child process, :func:`.wrapper._compile_apart`, then loads it from the cache: the loop loaded
+from numba's cache runs faster than the same loop compiled in the calling process — so(3) RKMK4 0.58 -> 0.34 µs
+per step, measured 2026-11-25): ~20 s with no group part (9 s of it in LLVM, the rest numba's typing and
+lowering), ~30 s for the closed forms, ~70–80 s for the matrix family (whose time is mostly LLVM: numba
 optimises each compiled function's module with all its callees linked in, so the matrix maps' deep call chain
 is optimised once per level); later processes load it from the cache (~1 s). RKMK4 with reconstruction,
 h = 0.005, best of 20 runs (thread CPU time): so(3) 0.33–0.34 µs per step (2.5–2.6x a plain loop hard-coded for
