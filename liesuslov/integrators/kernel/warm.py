@@ -30,15 +30,15 @@ import tempfile
 import time
 from pathlib import Path
 
-#: The kinds and, for each, the (n, reconstruct, constraints) of a scene that runs it.
+#: The kind whose scene compiles each family (:data:`~.common.FAMILIES`), the longest to compile first.
+FAMILY_KIND = {2: "dense", 1: "so3", 0: "none"}
 #: One kind of each family compiles the family: the default of :func:`compile_kinds`, the longest first (the
 #: other two then share the second core while it compiles).
-FAMILY_KINDS = ("dense", "so3", "none")
-#: The kind whose scene compiles each family (:data:`~.common.FAMILIES`).
-FAMILY_KIND = {2: "dense", 1: "so3", 0: "none"}
+FAMILY_KINDS = tuple(FAMILY_KIND.values())
 #: Set in the processes :func:`compile_kinds` starts: they compile their loop themselves (see
 #: :func:`~.wrapper._compiled`, which otherwise has a first call compile in such a process).
 COMPILE_HERE_ENV = "LIESUSLOV_KERNEL_COMPILE_HERE"
+#: The kinds and, for each, the (n, reconstruct, constraints) of a scene that runs it.
 KIND_SCENES = {
     "none": (3, False, "none"),
     "so3": (3, True, "none"),

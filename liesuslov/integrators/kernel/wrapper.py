@@ -199,9 +199,9 @@ def _compile_apart(family: int, sig: tuple) -> None:
     """Compile ``family``'s loop into numba's on-disk cache in a child process (:func:`.warm.compile_kinds`),
     unless the cache has it or this process is such a child; the caller then loads it from the cache.
 
-    Why: the loop loaded from the cache runs faster than the same loop compiled in this process (an so(3)
-    RKMK4 step 0.58 -> 0.34 µs, Kharlamova's dense SO(5) step ~10 -> ~8 µs; numba issue #10617 reports the
-    effect), and the compiler's Python objects stay in the child. A child that fails (no writable cache, no
+    Why: the loop loaded from the cache can run faster than the same loop compiled in this process (an so(3)
+    RKMK4 step 0.58 -> 0.34 µs; the dense family's Kharlamova step alike either way; numba issue #10617
+    reports the effect), and the compiler's Python objects stay in the child. A child that fails (no writable cache, no
     subprocess) leaves the compilation to this process, as before.
     """
     if os.environ.get(COMPILE_HERE_ENV) == "1":
