@@ -33,18 +33,21 @@ loop in one branch only), for each of its array arguments on entry and exit. On 
 stage this was ~30% of the step. The group operations therefore get their arrays *borrowed*
 (:func:`~.common._view`, :func:`~.common._borrow`: the same memory without the owner's meminfo, which numba
 does not count), the matrix kinds view their flat scratch as matrices the same way, and the so(3) operations are
-straight-line code on scalars. Borrowing is kept to arrays passed *into* compiled calls: borrowed views
-written by code inlined at IR level into the loop (the stage's field and dexp⁻¹) gave wrong numbers at the
-continuous extension's stages in one test (not understood; reverted), so the loop's own code only reads
-and writes the owners. A lead, not confirmed: numba's IR releases a variable right after its last use (``v =
-_borrow(a)`` is followed by ``del a``), so a borrowed view is safe only while its owner is still used later —
-true of the arrays passed into a call, not of a temporary owner inside IR-inlined code (a small reproducer of
-that did not show wrong values). One scratch allocation for the loop's ~35 work arrays (slices of it) was
-tried too: one allocation less per array, but LLVM no longer knew they do not alias — an so(3) step ~13%
-slower, reverted. Measured (interleaved processes, same machine):
-the Kharlamova scene's compiled solve (dense SO(5), Cayley, 16 RKMK8 steps) 232 -> 165 µs; dense SO(5) RKMK4
-with reconstruction 3.0 -> 2.2 µs per step; Fedorov–Kozlov low rank n = 64 40 -> 34 µs per step; so(3)
-~3% per step.
+straight-line code on scalars. The loop itself works on borrowed views of its arguments and of its scratch
+(:func:`.loop._solve_one`), so that the code inlined into it at IR level (the stage's field, Omega and dexp⁻¹) and
+the calls it makes count nothing either. numba releases a variable right after its last use (``v = _borrow(a)``
+is followed by ``del a``): a borrowed view of an array the function allocated is safe only while something
+still holds the owner — the loop keeps its scratch's owners in one tuple that it hands to a no-op
+(``_keepalive``) at its very end. (An earlier variant borrowed inside the IR-inlined code without keeping the
+owners and gave wrong numbers in one test — most likely memory released under the views; the variant here
+passes the suite.) One scratch allocation for the loop's ~35 work arrays (slices of it) was tried too: one
+allocation less per array, but LLVM no longer knew they do not alias — an so(3) step ~13% slower, reverted.
+Measured (interleaved processes, same machine): the Kharlamova scene's compiled solve (dense SO(5), Cayley,
+16 RKMK8 steps) 232 -> 165 µs; dense SO(5) RKMK4 with reconstruction 3.0 -> 2.2 µs per step; Fedorov–Kozlov
+low rank n = 64 40 -> 34 µs per step; so(3) ~3% per step. The borrowed loop (2026-11-25): so(3) 0.33 -> 0.29 µs
+per step; a batch of 10⁴ so(3) trajectories 1.44 -> 1.06–1.18x the single-threaded plain loop per
+trajectory-step; the dense kind's step ~3% slower (Kharlamova 16 steps 125 -> 129 µs cache-loaded; compiled in
+the process, 11.0 -> 10.5 µs per step: code placement, not more work).
 
 The on-disk cache: numba stamps a cached function with its own file, but a compiled caller embeds its
 callees' code; every function here is stamped with the contents of all the kernel's sources
@@ -58,7 +61,7 @@ per step, measured 2026-11-25): ~20 s with no group part (9 s of it in LLVM, the
 lowering), ~30 s for the closed forms, ~70–80 s for the matrix family (whose time is mostly LLVM: numba
 optimises each compiled function's module with all its callees linked in, so the matrix maps' deep call chain
 is optimised once per level); later processes load it from the cache (~1 s). RKMK4 with reconstruction,
-h = 0.005, best of 20 runs (thread CPU time): so(3) 0.33–0.34 µs per step (2.5–2.6x a plain loop hard-coded for
+h = 0.005, best of 20 runs (thread CPU time): so(3) 0.29–0.30 µs per step (2.2–2.3x a plain loop hard-coded for
 that method: the kernel's loops run over run-time sizes — k, stages, layouts — and read the field and Omega(xi) as
 coefficient lists, where the plain loop has constants); so(4) 0.65–0.72 µs per step (so4 kind, the
 Klebsh–Tisserand scene of the benchmark; 2.1–2.3x the plain loop's ~0.31 µs; benchmarks at acee8a8 and

@@ -46,6 +46,7 @@ from .common import (
     _I_SS,
     _NHEAD,
     _accept_factor,
+    _borrow,
     _combine,
     _initial_step,
     _jit,
@@ -425,6 +426,12 @@ def _reproject(mode, G, Wg):
             G[c] = G[c] / nr
 
 
+@_jit
+def _keepalive(owners):
+    """Nothing: a use of ``owners`` at the end of :func:`_solve_one`, so that numba keeps them (the memory of the
+    loop's borrowed views) alive until then."""
+
+
 @_jit_entry
 def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_off, cap, xi_out, G_out, status, t_stop,
                failure, nfev_o, steps_o, rejected_o, ev_count, ev_t, ev_xi, ev_G):
@@ -461,12 +468,12 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
     r = iprm[_I_R]
     a = iprm[_I_A]
     o = _NHEAD
-    fidx = iprm[o:o + 3 * nf].reshape((nf, 3))
+    fidx = _view(iprm, o, (nf, 3))
     o += 3 * nf
-    widx = iprm[o:o + 3 * nw].reshape((nw, 3))
+    widx = _view(iprm, o, (nw, 3))
     o += 3 * nw
-    ev_term = iprm[o:o + E]
-    ev_dir = iprm[o + E:o + 2 * E]
+    ev_term = _view(iprm, o, E)
+    ev_dir = _view(iprm, o + E, E)
     t0 = fprm[_F_T0]
     t1 = fprm[_F_T1]
     hfix = fprm[_F_H]
@@ -474,19 +481,19 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
     atol = fprm[_F_ATOL]
     expo = fprm[_F_EXPO]
     o = _FHEAD
-    A = fprm[o:o + S * S].reshape((S, S))
+    A = _view(fprm, o, (S, S))
     o += S * S
-    bw = fprm[o:o + S]
+    bw = _view(fprm, o, S)
     o += S
-    err = fprm[o:o + ne * S].reshape((ne, S))
+    err = _view(fprm, o, (ne, S))
     o += ne * S
-    dense = fprm[o:o + S * P].reshape((S, P))
+    dense = _view(fprm, o, (S, P))
     o += S * P
-    bern = fprm[o:o + 2 * nb].reshape((nb, 2))
+    bern = _view(fprm, o, (nb, 2))
     o += 2 * nb
-    fval = fprm[o:o + nf]
+    fval = _view(fprm, o, nf)
     o += nf
-    wval = fprm[o:o + nw]
+    wval = _view(fprm, o, nw)
     direction = 1.0 if t1 > t0 else -1.0
     s_eval = s + (1 if new_in else 0)
     # np.int64(1), not 1: numba compiles a separate specialisation for a literal argument
@@ -532,6 +539,22 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
     act_e = np.zeros(E, np.int64)
     sc_y = np.zeros(k + q)
     f_y = np.zeros(k + q)
+    # The loop works on borrowed views (common._view) of its scratch and arguments: no reference counting
+    # in the step. The scratch's owners live in `owners` to the end of the call (_keepalive): numba releases
+    # a variable after its last use, which would free the memory under a borrowed view.
+    owners = (F, hL, hK, xi, G, xi1, G1, Th, Th1, Oa, Ea, Eg, Xi, Gam0, Gam, z, Om, W, vb, bufs, Q, cvec, PQ,
+              PQ2, Wg, wts, xit, Gt, Tht, gold, gnew, ev_needG, act_th, act_e, sc_y, f_y)
+    F, hL, hK, xi, G, xi1, G1 = _borrow(F), _borrow(hL), _borrow(hK), _borrow(xi), _borrow(G), _borrow(xi1), _borrow(G1)
+    Th, Th1, Oa, Ea, Eg, Xi = _borrow(Th), _borrow(Th1), _borrow(Oa), _borrow(Ea), _borrow(Eg), _borrow(Xi)
+    Gam0, Gam, z, Om, W, vb = _borrow(Gam0), _borrow(Gam), _borrow(z), _borrow(Om), _borrow(W), _borrow(vb)
+    bufs, Q, cvec, PQ, PQ2, Wg = _borrow(bufs), _borrow(Q), _borrow(cvec), _borrow(PQ), _borrow(PQ2), _borrow(Wg)
+    wts, xit, Gt, Tht, gold, gnew = _borrow(wts), _borrow(xit), _borrow(Gt), _borrow(Tht), _borrow(gold), _borrow(gnew)
+    ev_needG, act_th, act_e, sc_y, f_y = _borrow(ev_needG), _borrow(act_th), _borrow(act_e), _borrow(sc_y), _borrow(f_y)
+    xi0, G0, gamma, t_eval, ev_coef = _borrow(xi0), _borrow(G0), _borrow(gamma), _borrow(t_eval), _borrow(ev_coef)
+    ev_off, xi_out, G_out, status = _borrow(ev_off), _borrow(xi_out), _borrow(G_out), _borrow(status)
+    t_stop, failure, nfev_o, steps_o = _borrow(t_stop), _borrow(failure), _borrow(nfev_o), _borrow(steps_o)
+    rejected_o, ev_count, ev_t, ev_xi = _borrow(rejected_o), _borrow(ev_count), _borrow(ev_t), _borrow(ev_xi)
+    ev_G = _borrow(ev_G)
     rec_n = 0
     t_rec = np.zeros(0)
     xi_rec = np.zeros((0, k))
@@ -546,11 +569,12 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
             xi[c] = xi0[bi, c]
         for c in range(q):
             G[c] = G0[bi, c]
-        gam = gamma[bi]
+        gam = _view(gamma, bi * gamma.shape[1], gamma.shape[1])
         rec_n = 0
-        t_rec = np.zeros(64 if record else 0)
-        xi_rec = np.zeros((t_rec.shape[0], k))
-        G_rec = np.zeros((t_rec.shape[0], q))
+        if record:  # (a single trajectory; a batch keeps the empty ones: no allocation per trajectory)
+            t_rec = np.zeros(64)
+            xi_rec = np.zeros((64, k))
+            G_rec = np.zeros((64, q))
         for e in range(E):
             ev_needG[e] = False
             for c in range(q):
@@ -794,6 +818,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
         nfev_o[bi] = nfev
         steps_o[bi] = nsteps
         rejected_o[bi] = nrej
+    _keepalive(owners)
     return t_rec[:rec_n].copy(), xi_rec[:rec_n].copy(), G_rec[:rec_n].copy()
 
 
