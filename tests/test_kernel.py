@@ -648,3 +648,42 @@ def test_borrowed_views_are_the_owners_memory():
     np.testing.assert_array_equal(flat, expect)
     np.testing.assert_array_equal(v, np.arange(4.0, 9.0))
     assert shape == (3, 4) and grid[2, 1] == -7.0
+
+
+def test_borrowed_scratch_keeps_its_owners():
+    """The loop borrows its scratch (no reference counting in the step): every array it allocates before the loop
+    and then borrows must be held in ``owners``, handed to ``_keepalive`` at the end of the call — numba releases
+    a variable after its last use, so an owner left out would be freed under its view (silently wrong numbers)."""
+    import ast
+    import inspect
+    import textwrap
+
+    from liesuslov.integrators.kernel import loop
+
+    fn = ast.parse(textwrap.dedent(inspect.getsource(loop._solve_one.py_func))).body[0]
+    allocated, borrowed, owners = set(), set(), None
+    for node in fn.body:  # the function's top level: the scratch, before the per-trajectory loop
+        if not isinstance(node, ast.Assign):
+            continue
+        if isinstance(node.targets[0], ast.Name) and node.targets[0].id == "owners":
+            owners = {e.id for e in node.value.elts}
+            continue
+        targets = node.targets[0].elts if isinstance(node.targets[0], ast.Tuple) else node.targets
+        values = node.value.elts if isinstance(node.value, ast.Tuple) else [node.value]
+        for target, value in zip(targets, values, strict=False):
+            if not isinstance(target, ast.Name):
+                continue
+            call = ast.unparse(value)
+            if call.startswith("np.zeros("):
+                allocated.add(target.id)
+            elif call == f"_borrow({target.id})":
+                borrowed.add(target.id)
+    params = {a.arg for a in fn.args.args}
+    record = {"t_rec", "xi_rec", "G_rec"}  # the step record: reallocated as it grows, so never borrowed
+    assert allocated and borrowed and owners is not None and record <= allocated
+    assert not record & borrowed
+    allocated -= record
+    assert borrowed - params == allocated, "every scratch array is borrowed"
+    assert allocated <= owners, f"scratch borrowed without its owner kept: {sorted(allocated - owners)}"
+    tail = [ast.unparse(s) for s in fn.body[-2:]]
+    assert tail[0] == "_keepalive(owners)" and tail[1].startswith("return"), tail

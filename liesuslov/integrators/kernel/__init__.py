@@ -64,7 +64,8 @@ is optimised once per level); later processes load it from the cache (~1 s). RKM
 h = 0.005, best of 20 runs (thread CPU time): so(3) 0.29–0.30 µs per step (2.2–2.3x a plain loop hard-coded for
 that method: the kernel's loops run over run-time sizes — k, stages, layouts — and read the field and Omega(xi) as
 coefficient lists, where the plain loop has constants); so(4) 0.60–0.62 µs per step (so4 kind, the
-Klebsh–Tisserand scene of the benchmark; 1.9–2.1x the plain loop's ~0.31 µs; benchmark at bfb9aac); Fedorov–Kozlov SO(256) (low-rank kind) ~0.55 ms per step.
+Klebsh–Tisserand scene of the benchmark; 1.9–2.1x the plain loop's ~0.31 µs; benchmark at bfb9aac);
+Fedorov–Kozlov SO(256) (low-rank kind) ~0.55 ms per step.
 
 What is compiled
 ----------------
