@@ -20,11 +20,12 @@ carry the scene), so no other scene compiles again. :mod:`.warm` compiles the fa
 
 Calls that LLVM does not inline pass every array argument field by field, so the small functions of each
 stage are inlined at numba IR level (:func:`~.common._jit_inline`: the polynomial field, the so(3) Omega and
-dexp⁻¹), and the closed-form kinds' operations take only the arguments they read (the family dispatch in
-:mod:`.group` passes those). Inlining has a compile-time price that grows faster than the loop: numba's typing
-of the loop took ~10 s more with event location and output inlined into it, so only the stages' calls are
-inlined — the finiteness test of a step is folded into the loops that form its state, the start of a
-trajectory and the rarer jobs are calls, the first step computes the group velocity in one function.
+dexp⁻¹, the closed forms' action on Gamma), and the closed-form kinds' operations take only the arguments they
+read (the family dispatch in :mod:`.group` passes those). Inlining has a compile-time price that grows faster
+than the loop: numba's typing of the loop took ~10 s more with event location and output inlined into it, so
+only the stages' calls are inlined — the finiteness test of a step is folded into the loops that form its
+state, the start of a trajectory and the rarer jobs are calls, the first step computes the group velocity in
+one function.
 Only the loop has numba's CPython wrapper (the others are called from compiled code only).
 
 Reference counting: numba counts references to an array atomically — for every view made by indexing,
@@ -47,7 +48,11 @@ Measured (interleaved processes, same machine): the Kharlamova scene's compiled 
 low rank n = 64 40 -> 34 µs per step; so(3) ~3% per step. The borrowed loop (2026-11-25): so(3) 0.33 -> 0.29 µs
 per step; a batch of 10⁴ so(3) trajectories 1.44 -> 1.06–1.18x the single-threaded plain loop per
 trajectory-step; the dense kind's step ~3% slower (Kharlamova 16 steps 125 -> 129 µs cache-loaded; compiled in
-the process, 11.0 -> 10.5 µs per step: code placement, not more work).
+the process, 11.0 -> 10.5 µs per step: code placement, not more work). The closed forms' action on Gamma
+inlined in the stage (``_so3_rotate``, ``_so4_rotate``; 2026-11-25): Klebsh–Tisserand so(4) RKMK4 0.62 -> 0.60 µs
+per step (1.94 -> 1.88x the plain loop, four interleaved pairs), the family's compile time unchanged (40–43 s
+against 41–44 s); inlining the update of g as well (``_so3_update``, ``_so4_update``, once a step) gave
+another ~5% (so(3) 0.289 -> 0.271 µs) for ~8 s more compile (48–53 s): left as calls.
 
 The on-disk cache: numba stamps a cached function with its own file, but a compiled caller embeds its
 callees' code; every function here is stamped with the contents of all the kernel's sources

@@ -455,7 +455,7 @@ def _lowrank_dinv(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs)
 # The so3 operations below are straight-line code on scalars (no matrix, no scratch, no loop in one branch
 # only); their arrays come borrowed from the family dispatch, so the reference counting numba keeps around
 # the call of _so3_coef is not atomic.
-@_jit
+@_jit_inline
 def _so3_rotate(chart, Th, sign, v, out):
     """out = phi(sign hat(Th)) v = c v + sign a Th × v + b (Th·v) Th."""
     w0, w1, w2 = Th[0], Th[1], Th[2]

@@ -112,7 +112,7 @@ def _so4_dinv(chart, Th, Om, h, out, row, bern):
     out[row, 5] = h * vals[5]
 
 
-@_jit
+@_jit_inline
 def _so4_rotate(chart, Th, sign, v, out):
     """out = phi(sign Th) v for a 4-vector v."""
     p = (Th[0], Th[1], Th[2])
