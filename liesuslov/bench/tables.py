@@ -253,7 +253,8 @@ h = 0.005, one scalar loop without allocation — checked against the library's 
 every run. Library and floor are timed in alternating rounds (up to 15, the fastest of each), so that a
 slow spell of the shared machine hits both sides of the ratio. (a) one trajectory: library / floor time
 per step; (b) 10⁴ trajectories: library / floor (single thread) per trajectory-step; (c) the default
-scene of `liesuslov run` with 500 output times: field evaluations / those of the end point only; (d)
+scene of `liesuslov run` with 500 output times: field evaluations / those of the end point only (and
+for comparison, the same ratio for scipy's DOP853 on the embedded ODE); (d)
 the exponent of the n-sweep on numba; (e) the fastest liesuslov route / scipy DOP853 at equal error;
 (f) `import liesuslov` and the first compiled call (empty numba cache, then loading it), each in a
 fresh process.

@@ -28,7 +28,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .scenes import FLOOR_H, FLOOR_SCENES, floor_free_body, floor_klebsh_tisserand, hat3
+from .scenes import FLOOR_H, FLOOR_SCENES, _fk_g_rhs, floor_free_body, floor_klebsh_tisserand, hat3
 from .timing import affordable_steps, child_env, timed_together
 
 #: The floor and the library must agree to this (largest absolute difference of the state and of g).
@@ -147,6 +147,22 @@ def measure_batch(batch: int, steps: int, repeats: int, extra_kw: dict) -> dict:
             "agreement": same, "agrees": bool(same <= AGREEMENT_TOL), "floor_status": "ok"}
 
 
+def _scipy_dense_nfev(sc) -> tuple[int, int]:
+    """scipy's DOP853 on the default scene's embedded ODE (xi, vec g), Gamma = g^T gamma, at target (c)'s
+    tolerances: (nfev with the 500 output times, nfev with the end point only). Its dense output is Hairer's
+    7th-order extension too (three more evaluations on each step with an output inside): the same price."""
+    from scipy.integrate import solve_ivp
+
+    rhs = _fk_g_rhs(4, lambda xi, G: sc.coeffs * G[:-1] * G[-1])  # the scene's field, c_i Gamma_i Gamma_4
+    y0 = np.concatenate([sc.x0, np.eye(4).ravel()])  # g(0) = I: gamma = Gamma0
+
+    def nfev(t_eval):
+        sol = solve_ivp(rhs, (0.0, DENSE_T1), y0, method="DOP853", rtol=1e-10, atol=1e-12, t_eval=t_eval,
+                        args=(sc.Gamma0,))
+        return int(sol.nfev) if sol.success else -1
+    return nfev(np.linspace(0.0, DENSE_T1, DENSE_POINTS)), nfev([DENSE_T1])
+
+
 def measure_dense_output(extra_kw: dict) -> dict:
     """Target (c): nfev of the default scene with 500 output times over nfev with the end point only."""
     import liesuslov as ls
@@ -159,9 +175,12 @@ def measure_dense_output(extra_kw: dict) -> dict:
     dense = run(np.linspace(0.0, DENSE_T1, DENSE_POINTS))
     end = run([DENSE_T1])
     ok = dense.success and end.success
+    scipy_dense, scipy_end = _scipy_dense_nfev(sc)
+    scipy_ratio = scipy_dense / scipy_end if min(scipy_dense, scipy_end) > 0 else math.nan
     return {"target": "c", "nfev_dense": int(dense.stats["nfev"]), "nfev_end": int(end.stats["nfev"]),
             "steps_dense": int(dense.stats["steps"]), "steps_end": int(end.stats["steps"]),
-            "ratio": dense.stats["nfev"] / end.stats["nfev"],
+            "ratio": dense.stats["nfev"] / end.stats["nfev"], "scipy_nfev_dense": scipy_dense,
+            "scipy_nfev_end": scipy_end, "scipy_ratio": scipy_ratio,
             "end_difference": _agreement((dense.omega[-1], dense.g[-1]), (end.omega[-1], end.g[-1])),
             "status": "ok" if ok else "failed", "message": "" if ok else f"{dense.message}; {end.message}"}
 
@@ -265,7 +284,9 @@ def summary(target_rows: list[dict], scaling_exponent: dict, scaling: list[dict]
     r = by.get(("c", None), {})
     add("c", f"adaptive, {DENSE_POINTS} output times: nfev / nfev of the end point only", r.get("ratio", math.nan),
         GOALS["c"], f"{r.get('nfev_dense', '?')} vs {r.get('nfev_end', '?')} evaluations, {r.get('steps_dense', '?')} "
-        f"vs {r.get('steps_end', '?')} steps (rkmk853, rtol 1e-10, default scene)" + _status(r))
+        f"vs {r.get('steps_end', '?')} steps (rkmk853, rtol 1e-10, default scene); scipy DOP853 on the embedded ODE: "
+        f"{_num(r.get('scipy_ratio'), '.3g')} ({r.get('scipy_nfev_dense', '?')} vs {r.get('scipy_nfev_end', '?')})"
+        + _status(r))
     fit = scaling_exponent.get("numba/exp") or scaling_exponent.get("exp")
     ran = [x for x in scaling if x.get("requested") == "numba" and x.get("chart") == "exp" and x.get("status") == "ok"]
     nmax = max((x["n"] for x in ran), default=None)
