@@ -7,7 +7,9 @@ location by a bracketing root finder (Illinois), re-projection, failures with th
 (:func:`.loop._solve_one`) runs the stages and the step's end inline (a call per step would pass ~30
 arrays, each reference-counted on the way in and out) and calls one function per rarer job — the first
 step, the error norm, event location, output, re-projection. The group code is inlined into it by family
-(:mod:`.group`). A batch runs in contiguous chunks on threads (the loop releases the GIL; no parfor); a
+(:mod:`.group`). A batch runs in contiguous chunks on the process's pool of threads, made on first use and
+kept (the loop releases the GIL; no parfor; :func:`.wrapper._solve_batch`: 8 free bodies × 10 steps 0.82 ->
+0.36 ms a call against a pool made per call); a
 trajectory's numbers do not depend on its batch mates or the chunking (no reduction across trajectories,
 the same code path for B = 1 and B > 1).
 

@@ -1,11 +1,9 @@
-"""One trajectory's whole solve (stages, controller, output, events, failures, re-projection) and the
-batch over threads."""
+"""One trajectory's whole solve (stages, controller, output, events, failures, re-projection), compiled;
+the batch's chunks of trajectories are spread over threads by :func:`~.wrapper._solve_batch`."""
 
 from __future__ import annotations
 
-import functools
 import math
-import os
 
 import numba  # (ImportError without numba: the front door then runs numpy)
 import numpy as np
@@ -820,26 +818,3 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
         rejected_o[bi] = nrej
     _keepalive(owners)
     return t_rec[:rec_n].copy(), xi_rec[:rec_n].copy(), G_rec[:rec_n].copy()
-
-
-@functools.cache
-def _cpu_count() -> int:
-    """The machine's cores (``os.cpu_count`` reads /sys on every call: ~15 µs)."""
-    return os.cpu_count() or 1
-
-
-def _solve_batch(solve_one, *args) -> None:
-    """Every trajectory of the batch, in contiguous chunks over the cores: ``solve_one(lo, hi, *args)`` (the
-    compiled :func:`_solve_one` of the problem's kind) releases the GIL, so threads run the chunks in parallel
-    (no parfor to compile; no reduction across trajectories, so a trajectory's numbers do not depend on the
-    chunking)."""
-    B = args[2].shape[0]
-    workers = 1 if B == 1 else min(B, numba.config.NUMBA_NUM_THREADS, _cpu_count())
-    if workers <= 1:
-        solve_one(0, B, *args)
-        return
-    bounds = np.linspace(0, B, 4 * workers + 1).astype(np.int64)
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(workers) as pool:
-        list(pool.map(lambda c: solve_one(int(bounds[c]), int(bounds[c + 1]), *args), range(len(bounds) - 1)))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -28,7 +30,7 @@ from .common import (
     LOWRANK_MIN_N,
     MODES,
 )
-from .loop import _solve_batch, _solve_one
+from .loop import _solve_one
 from .warm import COMPILE_HERE_ENV, FAMILY_KIND, compile_kinds
 
 
@@ -236,6 +238,43 @@ def _nans(shape: tuple) -> np.ndarray:
     out = np.empty(shape)
     out.fill(np.nan)  # (np.full is a Python function: ~1 µs more a call)
     return out
+
+
+@functools.cache
+def _cpu_count() -> int:
+    """The machine's cores (``os.cpu_count`` reads /sys on every call: ~15 µs)."""
+    return os.cpu_count() or 1
+
+
+_POOL_LOCK = threading.Lock()
+#: (pid, pool) of the batch threads: made on first use and kept (starting two threads costs ~0.2-1 ms a call,
+#: as much as a small batch's whole solve); made again in a forked child, which inherits the object, not the
+#: threads.
+_POOL: tuple[int, ThreadPoolExecutor] | None = None
+
+
+def _batch_pool() -> ThreadPoolExecutor:
+    """The process's thread pool for :func:`_solve_batch` (one thread per core numba may use)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL[0] != os.getpid():
+            workers = max(1, min(numba.config.NUMBA_NUM_THREADS, _cpu_count()))
+            _POOL = (os.getpid(), ThreadPoolExecutor(workers, thread_name_prefix="liesuslov-batch"))
+        return _POOL[1]
+
+
+def _solve_batch(solve_one, *args) -> None:
+    """Every trajectory of the batch, in contiguous chunks over the cores: ``solve_one(lo, hi, *args)`` (the
+    compiled :func:`~.loop._solve_one` of the problem's kind) releases the GIL, so threads run the chunks in
+    parallel (no parfor to compile; no reduction across trajectories, so a trajectory's numbers do not depend
+    on the chunking). Calls from several threads share the pool: their chunks queue, none waits on another's."""
+    B = args[2].shape[0]
+    workers = 1 if B == 1 else min(B, numba.config.NUMBA_NUM_THREADS, _cpu_count())
+    if workers <= 1:
+        solve_one(0, B, *args)
+        return
+    bounds = np.linspace(0, B, 4 * workers + 1).astype(np.int64)
+    list(_batch_pool().map(lambda c: solve_one(int(bounds[c]), int(bounds[c + 1]), *args), range(len(bounds) - 1)))
 
 
 def solve(problem: Problem) -> RawResult:
