@@ -34,8 +34,8 @@ rtol = 1e-10
 atol = 1e-12
 n_out = 501                        # output times, evenly spaced
 reconstruct = true                 # also integrate g in SO(4); then Gamma = g^T gamma
-backend = "numpy"                  # "auto" uses the compiled kernel (liesuslov[fast]) when installed: worth
-                                   # it for long single-trajectory runs; its first use compiles it (about 12 s, once)
+backend = "numpy"                  # "auto" uses the compiled kernel (liesuslov[fast]) when installed: worth it
+                                   # for long runs and batches; its first use on a machine compiles it (~30 s, once)
 
 [output]
 name = "Klebsh–Tisserand, n = 4"
