@@ -246,21 +246,35 @@ def _cpu_count() -> int:
     return os.cpu_count() or 1
 
 
+def _threads() -> int:
+    """Threads a batch may use: the cores, at most numba's thread count (``NUMBA_NUM_THREADS``)."""
+    return max(1, min(numba.config.NUMBA_NUM_THREADS, _cpu_count()))
+
+
+#: The batch's threads: made on first use and kept (starting two threads costs ~0.5 ms a call, as much as a
+#: small batch's whole solve). A forked child inherits the pool object but not its threads, and perhaps the
+#: lock held by another thread: it starts afresh (_forget_pool).
+_POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
-#: (pid, pool) of the batch threads: made on first use and kept (starting two threads costs ~0.2-1 ms a call,
-#: as much as a small batch's whole solve); made again in a forked child, which inherits the object, not the
-#: threads.
-_POOL: tuple[int, ThreadPoolExecutor] | None = None
+
+
+def _forget_pool() -> None:
+    """In a forked child: no pool yet, and a lock nobody holds."""
+    global _POOL, _POOL_LOCK
+    _POOL, _POOL_LOCK = None, threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):  # (POSIX; there is no fork elsewhere)
+    os.register_at_fork(after_in_child=_forget_pool)
 
 
 def _batch_pool() -> ThreadPoolExecutor:
-    """The process's thread pool for :func:`_solve_batch` (one thread per core numba may use)."""
+    """The process's thread pool for :func:`_solve_batch`, :func:`_threads` threads."""
     global _POOL
     with _POOL_LOCK:
-        if _POOL is None or _POOL[0] != os.getpid():
-            workers = max(1, min(numba.config.NUMBA_NUM_THREADS, _cpu_count()))
-            _POOL = (os.getpid(), ThreadPoolExecutor(workers, thread_name_prefix="liesuslov-batch"))
-        return _POOL[1]
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(_threads(), thread_name_prefix="liesuslov-batch")
+        return _POOL
 
 
 def _solve_batch(solve_one, *args) -> None:
@@ -269,7 +283,7 @@ def _solve_batch(solve_one, *args) -> None:
     parallel (no parfor to compile; no reduction across trajectories, so a trajectory's numbers do not depend
     on the chunking). Calls from several threads share the pool: their chunks queue, none waits on another's."""
     B = args[2].shape[0]
-    workers = 1 if B == 1 else min(B, numba.config.NUMBA_NUM_THREADS, _cpu_count())
+    workers = 1 if B == 1 else min(B, _threads())
     if workers <= 1:
         solve_one(0, B, *args)
         return
