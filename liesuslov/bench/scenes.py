@@ -124,6 +124,12 @@ def _fk_g_rhs(n: int, xi_dot: Callable) -> Callable:
     return rhs
 
 
+def klebsh_tisserand_rhs(c: np.ndarray) -> Callable:
+    """The Klebsh–Tisserand body in SO(4) as scipy integrates it: ``rhs(t, y, gamma)`` of the embedded ODE
+    (xi, vec g), ``xi_i' = c_i Gamma_i Gamma_4`` with ``c_i = (B_i - B_4) / (I_i + I_4)``, ``Gamma = g^T gamma``."""
+    return _fk_g_rhs(4, lambda xi, G: c * G[:-1] * G[-1])
+
+
 def _klebsh_tisserand() -> BenchScene:
     """Klebsh–Tisserand in SO(4) with its attitude: Omega, Gamma against the closed form on the torus."""
     import liesuslov as ls
@@ -140,7 +146,7 @@ def _klebsh_tisserand() -> BenchScene:
     omega0[idx] = u0
     t1 = 20.0
     c = (B[:-1] - B[-1]) / (I[:-1] + I[-1])
-    base = _fk_g_rhs(n, lambda xi, G: c * G[:-1] * G[-1])
+    base = klebsh_tisserand_rhs(c)
 
     def analytic():
         u, G = ls.analytic.KlebshTisserandMotion(u0, G0, I, B).state(t1)

@@ -28,7 +28,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .scenes import FLOOR_H, FLOOR_SCENES, _fk_g_rhs, floor_free_body, floor_klebsh_tisserand, hat3
+from .scenes import FLOOR_H, FLOOR_SCENES, floor_free_body, floor_klebsh_tisserand, hat3, klebsh_tisserand_rhs
 from .timing import affordable_steps, child_env, timed_together
 
 #: The floor and the library must agree to this (largest absolute difference of the state and of g).
@@ -153,7 +153,7 @@ def _scipy_dense_nfev(sc) -> tuple[int, int]:
     7th-order extension too (three more evaluations on each step with an output inside): the same price."""
     from scipy.integrate import solve_ivp
 
-    rhs = _fk_g_rhs(4, lambda xi, G: sc.coeffs * G[:-1] * G[-1])  # the scene's field, c_i Gamma_i Gamma_4
+    rhs = klebsh_tisserand_rhs(sc.coeffs)
     y0 = np.concatenate([sc.x0, np.eye(4).ravel()])  # g(0) = I: gamma = Gamma0
 
     def nfev(t_eval):
