@@ -89,6 +89,8 @@ def check_real(x: Any, name: str) -> float:
     else:
         if np.iscomplexobj(x):
             raise TypeError(f"{name} must be a real number, got the complex {x!r}")
+        if isinstance(x, (str, bytes)):  # float("0.1") would read it
+            raise TypeError(f"{name} must be a real number, got the string {x!r}")
         try:
             val = float(x)
         except (TypeError, ValueError) as exc:
@@ -165,11 +167,21 @@ def unit_vectors(x: np.ndarray, name: str, *, tol: float = 1e-8) -> np.ndarray:
 
 
 def check_t_span(t_span) -> tuple[float, float]:
-    """``(t0, t1)`` from a pair of finite, different numbers (ValueError naming ``t_span`` otherwise)."""
+    """``(t0, t1)`` from a pair of finite, different numbers (ValueError naming ``t_span`` otherwise; TypeError
+    for strings, which ``float`` would read)."""
+    bad = f"t_span must be a pair of numbers (t0, t1), got {t_span!r}"
+    if isinstance(t_span, (str, bytes)):
+        raise TypeError(bad)
     try:
-        t0, t1 = (float(v) for v in t_span)
+        pair = tuple(t_span)
+    except TypeError as exc:
+        raise ValueError(bad) from exc
+    if any(isinstance(v, (str, bytes)) for v in pair):
+        raise TypeError(bad)
+    try:
+        t0, t1 = (float(v) for v in pair)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"t_span must be a pair of numbers (t0, t1), got {t_span!r}") from exc
+        raise ValueError(bad) from exc
     if not (math.isfinite(t0) and math.isfinite(t1)):
         raise ValueError(f"t_span must be finite, got {t_span!r}")
     if t0 == t1:

@@ -1347,6 +1347,11 @@ def test_method_of_wrong_type_names_argument():
         ls.integrate(sys, [0.0, 1.0, 0.5], (0.0, 1.0), h=0.1, reconstruct="no")
     with pytest.raises(TypeError, match="h must be"):
         ls.integrate(sys, [0.0, 1.0, 0.5], (0.0, 1.0), h=True)
+    with pytest.raises(TypeError, match="h must be a real number, got the string"):  # float("0.1") would read it
+        ls.integrate(sys, [0.0, 1.0, 0.5], (0.0, 1.0), h="0.1")
+    for span in (("0", "1"), "01"):
+        with pytest.raises(TypeError, match="t_span"):
+            ls.integrate(sys, [0.0, 1.0, 0.5], span, h=0.1)
     with pytest.raises(ValueError, match="empty"):
         ls.integrate(sys, np.zeros((0, 3)), (0.0, 1.0), h=0.1)
 

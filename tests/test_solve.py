@@ -7,6 +7,8 @@ against scipy in its own tests).
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 from scipy.optimize import brentq
@@ -158,9 +160,15 @@ def test_at_gives_exact_structure_and_rejects_outside(backend):
     assert np.max(np.abs(s.g[[1, 2, 0], 1] - g_ref)) < 1e-8
     with pytest.raises(ValueError, match="t_span"):
         sol.at([11.0])
+    with pytest.raises(ValueError, match="t is empty"):
+        sol.at([])
     plain = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45")
     with pytest.raises(ValueError, match="dense_output"):
         plain.at([0.5])
+    copied = pickle.loads(pickle.dumps(sol))
+    assert np.array_equal(copied.g, sol.g)
+    with pytest.raises(ValueError, match="pickled or copied"):
+        copied.at([0.5])
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -238,6 +246,85 @@ def test_user_callable_event_runs_on_numpy():
     assert sol.stats["backend"] == "numpy"
     rec = sol.events[0]
     assert rec.t.size > 0 and np.allclose(rec.Omega[:, 2, 0], 0.25, atol=1e-10)
+
+
+def test_user_event_sees_the_batch_axes_and_may_use_per_trajectory_parameters():
+    """A user callable is called with the batch axes leading (API.md): t batch-shaped, Omega (..., n, n),
+    Gamma (..., n); per-trajectory parameters of the batch's shape then work, and a batch gives each
+    trajectory the crossings it has alone."""
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(I3), potential=ls.LinearPotential([0.0, 0.0, 1.0]))
+    O = np.array([[[0.0, 0.5, 0.2], [0.0, -0.3, 0.4]], [[0.0, 0.1, 0.9], [0.0, 0.2, -0.6]]])  # batch (2, 2)
+    Gamma0 = np.array([0.6, 0.0, 0.8])
+    T = np.array([[1.0, 2.0], [3.0, 4.5]])
+    shapes = set()
+
+    def clock(t, Omega, Gamma, g):
+        shapes.add((np.shape(t), Omega.shape, Gamma.shape, g))
+        return t - T
+
+    sol = ls.integrate(system, O, (0.0, 5.0), Gamma0=Gamma0, method="rkmk45", events=clock)
+    assert shapes == {((2, 2), (2, 2, 3, 3), (2, 2, 3), None)}
+    rec = sol.events[0]
+    assert rec.index.tolist() == [0, 1, 2, 3]
+    assert np.allclose(rec.t, T.ravel(), rtol=0, atol=1e-12)
+
+    def level(t, Omega, Gamma, g):
+        return Gamma[..., 2] - 0.5
+
+    batch = ls.integrate(system, O, (0.0, 20.0), Gamma0=Gamma0, method="rkmk45", events=level).events[0]
+    for b in range(4):
+        alone = ls.integrate(system, O.reshape(4, 3)[b], (0.0, 20.0), Gamma0=Gamma0, method="rkmk45",
+                             events=level).events[0]
+        assert alone.t.size > 0 and np.array_equal(alone.t, batch.t[batch.index == b])
+    with pytest.raises(ValueError, match=r"events\[0\].*shape \(2, 2\)"):
+        ls.integrate(system, O, (0.0, 5.0), Gamma0=Gamma0, method="rkmk45", events=lambda t, O_, G, g: np.zeros(3))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_root_on_a_step_end_is_one_crossing(backend):
+    """A value that reaches exactly 0 at a step's end is one crossing (scipy's rule counts it again when
+    the next step leaves 0); a trajectory that starts on the surface has not crossed it."""
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(I3), potential=ls.LinearPotential([0.0, 0.0, 1.0]))
+    O, Gamma0 = np.array([0.0, 0.5, 0.2]), np.array([0.6, 0.0, 0.8])
+    run = {"method": "rkmk4", "h": 0.1, "Gamma0": Gamma0, "backend": backend}
+    steps = ls.integrate(system, O, (0.0, 2.0), **run)
+    level = steps.Gamma[5, 2]  # the value at t = 0.5, a step's end
+    ev = LinearEvent(Gamma=[0.0, 0.0, 1.0], offset=level)
+    rec = ls.integrate(system, O, (0.0, 2.0), events=ev, **run).events[0]
+    assert rec.t[0] == 0.5 and np.count_nonzero(rec.t == 0.5) == 1
+    crossings = np.flatnonzero(np.diff(np.sign(steps.Gamma[:, 2] - level)))  # sign changes between steps
+    assert rec.t.size == crossings.size - 1  # the zero at 0.5 makes two sign changes of one crossing
+    start = ls.integrate(system, O, (0.0, 2.0), events=LinearEvent(Gamma=[0.0, 0.0, 1.0], offset=0.8), **run)
+    assert 0.0 not in start.events[0].t
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_every_output_after_a_stop_is_nan(backend):
+    """Also the components of omega outside D (0 while it runs), Omega's diagonal and the dense output."""
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(I3), potential=ls.LinearPotential([0.0, 0.0, 1.0]))
+    O = np.array([[0.0, 0.5, 0.2], [0.0, 30.0, 40.0]])
+    sol = ls.integrate(system, O, (0.0, 5.0), Gamma0=[0.6, 0.0, 0.8], method="rkmk45", max_steps=60,
+                       dense_output=True, backend=backend)
+    assert sol.status.tolist() == [0, -1]
+    assert np.all(np.isnan(sol.omega[-1, 1])) and np.all(np.isnan(sol.Omega[-1, 1]))
+    assert np.all(np.isfinite(sol.omega[:, 0])) and np.all(np.isfinite(sol.Omega[:, 0]))
+    late = sol.at([5.0])
+    assert np.all(np.isnan(late.omega[0, 1])) and np.all(np.isnan(late.Omega[0, 1]))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_one_trajectory_ends_at_its_terminal_event(backend):
+    """Without t_eval one trajectory reports every step and, stopped by a terminal event, the event's
+    state last (as solve_ivp); a batch of one (shape (1,)) is a batch: the two ends."""
+    system = free_body()
+    ev = coordinate_plane("omega", 1, dim=3, terminal=True, direction=-1)
+    sol = ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 20.0), method="rkmk45", events=ev, backend=backend)
+    assert sol.status == 1
+    rec = sol.events[0]
+    assert sol.t[-1] == rec.t[0] == sol.stats["t_stop"] and sol.t[-2] < sol.t[-1]
+    assert np.array_equal(sol.omega[-1], rec.omega[0]) and abs(sol.omega[-1, 1]) < 1e-12
+    one = ls.integrate(system, [[0.3, 1.0, 0.4]], (0.0, 3.0), method="rkmk45", backend=backend)
+    assert one.t.tolist() == [0.0, 3.0] and one.omega.shape == (2, 1, 3)
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -1,4 +1,5 @@
-"""The step-size controller and the error norm: one source for the numpy solver and the compiled kernel.
+"""The step-size controller, the error norm and the event rules: one source for the numpy solver and the
+compiled kernel.
 
 Every function here is written elementwise with numpy ufuncs, so that it runs on arrays (one entry per
 trajectory, in :mod:`.solve_numpy`) and, compiled by numba as it stands, on floats (:mod:`.kernel`).
@@ -17,6 +18,11 @@ The group part's estimate is the chart estimate ``E`` (an algebra element) carri
 
 A step is accepted when ``norm <= 1`` (a NaN norm never is); the next step is ``h * factor`` with scipy's
 factors (safety 0.9, between 0.2 and 10, no growth right after a rejection).
+
+Events: a step crosses an event's surface when its value leaves one side of 0 and reaches 0 or the other
+side (:func:`crossed`); the crossing is located on the step's continuous extension, theta in [0, 1], by the
+Illinois variant of regula falsi (:func:`secant_point`, :func:`illinois_update`) until the bracket is a few
+ulps of t wide (:func:`bracket_closed`, :func:`closest_end`).
 """
 
 from __future__ import annotations
@@ -24,7 +30,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["SAFETY", "MIN_FACTOR", "MAX_FACTOR", "select", "scale", "combine", "accept_factor", "reject_factor",
-           "initial_step", "probe_step"]
+           "initial_step", "probe_step", "crossed", "secant_point", "illinois_update", "closest_end",
+           "bracket_closed"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 # Added under the square root of DOP853's combination so that S5 = S3 = 0 gives 0, not 0/0 (it changes
@@ -78,3 +85,50 @@ def initial_step(d0, d1, d2, h0, order):
 def probe_step(d0, d1):
     """The probe step of :func:`initial_step`: ``0.01 d0 / d1``, or 1e-6 when either norm is below 1e-5."""
     return select((d0 < 1e-5) | (d1 < 1e-5), 1e-6, 0.01 * d0 / np.maximum(d1, 1e-300))
+
+
+def crossed(old, new, direction):
+    """The step crosses the event's surface: the value goes from below 0 to 0 or above (up), or from above
+    to 0 or below (down), in the event's ``direction`` (+1 up, -1 down, 0 both; scipy's convention).
+
+    A value that is exactly 0 at the start of a step is not a crossing: the trajectory started on the
+    surface (at t0), or the crossing was the previous step's, which ended on it — so a root that falls on a
+    step's end is found once, not twice (scipy reports it twice).
+    """
+    return (((old < 0.0) & (new >= 0.0) & (direction >= 0))
+            | ((old > 0.0) & (new <= 0.0) & (direction <= 0)))
+
+
+def secant_point(lo, hi, flo, fhi):
+    """The next point of regula falsi in the bracket ``[lo, hi]`` with values ``flo``, ``fhi`` of opposite
+    signs: ``(lo fhi - hi flo) / (fhi - flo)``, or the midpoint where rounding puts it outside ``(lo, hi)``."""
+    c = (lo * fhi - hi * flo) / (fhi - flo)
+    return select((lo < c) & (c < hi), c, 0.5 * (lo + hi))
+
+
+def illinois_update(lo, hi, flo, fhi, vlo, vhi, side, c, fc):
+    """The bracket after the value ``fc`` at ``c``: ``c`` replaces the end whose value has the sign of ``fc``.
+    ``flo``, ``fhi`` are the values the secant uses: when the same end is replaced twice running (``side``:
+    +1 hi, -1 lo, 0 neither yet) the other end's is halved (Illinois), which keeps the convergence
+    superlinear where plain regula falsi stalls; ``vlo``, ``vhi`` are the ends' true values (for
+    :func:`closest_end`).
+
+    Returns ``(lo, hi, flo, fhi, vlo, vhi, side)``.
+    """
+    right = (fc > 0.0) == (fhi > 0.0)  # c and hi on the same side of the root
+    flo_kept = select(side == 1, 0.5 * flo, flo)  # lo kept a second time running: halved
+    fhi_kept = select(side == -1, 0.5 * fhi, fhi)
+    return (select(right, lo, c), select(right, c, hi), select(right, flo_kept, fc), select(right, fc, fhi_kept),
+            select(right, vlo, fc), select(right, fc, vhi), select(right, 1, -1))
+
+
+def closest_end(lo, hi, vlo, vhi):
+    """The root of a closed bracket: the end whose true value is the smaller in magnitude."""
+    return select(np.abs(vlo) < np.abs(vhi), lo, hi)
+
+
+def bracket_closed(t, h, lo, hi, c, direction):
+    """The bracket ``[lo, hi]`` of theta spans at most 4 ulps of the time ``t + c h`` (a step of size ``h`` from
+    ``t``, integrating in ``direction``): the root is located to rounding in t."""
+    tc = t + c * h
+    return np.abs(h) * (hi - lo) <= 4.0 * np.abs(np.nextafter(tc, direction * np.inf) - tc)

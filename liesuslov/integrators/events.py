@@ -2,11 +2,14 @@
 
 scipy's conventions: an event is a callable with optional attributes ``terminal`` (bool: stop the
 trajectory at its first crossing) and ``direction`` (+1: only crossings where the value goes up, -1:
-down, 0: both). It is called with the batch axes leading — ``t`` a float or (B,) per trajectory, ``Omega``
-(B, n, n) (coordinates (B, d) on algebras other than so(n)), ``Gamma`` (B, n) or None, ``g`` (B, m, m) or
-None — and returns (B,) values. A crossing is a sign change of the value between two accepted steps; its
-time is located by a bracketing root finder on the continuous extension to near rounding in t. A value
-exactly 0 at t0 is not a crossing (a trajectory that starts on the surface has not crossed it).
+down, 0: both). It is called with the batch axes leading — ``t`` a float (one trajectory) or an array of
+the batch shape (...) (each trajectory's own time), ``Omega`` (..., n, n) (coordinates (..., d) on
+algebras other than so(n)), ``Gamma`` (..., n) or None, ``g`` (..., m, m) or None — and returns one value
+per trajectory, (...): it may use per-trajectory parameters of the batch's shape (the trajectories not
+being evaluated are passed at their last accepted points; their values are not read). A crossing is a
+step whose value leaves one side of 0 and reaches 0 or the other side (:func:`.control.crossed`: a root
+on a step's end is one crossing, and a value exactly 0 at t0 is none); its time is located by a
+bracketing root finder (Illinois) on the continuous extension to near rounding in t.
 
 :class:`LinearEvent` — a linear function of the state, ``a . omega + b . Gamma + sum(c * g) - offset`` — is
 what the built-in helpers return and what the compiled kernel evaluates natively; any other callable

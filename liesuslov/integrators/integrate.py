@@ -10,7 +10,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -21,7 +21,7 @@ from ..mechanics.system import SuslovSystem
 from .charts import CHARTS
 from .events import EventRecord, LinearEvent, event_flags
 from .plan import plan_for
-from .problem import FAILURES, Problem, RawResult
+from .problem import FAILURES, STATUS_TERMINAL, Problem, RawResult
 from .solution import Solution
 
 __all__ = ["integrate", "METHODS", "Method", "BACKENDS"]
@@ -90,13 +90,15 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         Gamma), scaled like scipy's (``atol + rtol |y|`` per component, RMS over the state's components).
     t_eval : array_like, shape (M,), optional
         Output times (sorted in the direction of integration), served by the method's continuous
-        extension: they do not change the steps taken. Default: every step for a single trajectory,
-        the two ends of t_span for a batch.
+        extension: they do not change the steps taken. Default: every step for a single trajectory (no
+        batch axes; stopped by a terminal event, the event's state last), the two ends of t_span for a
+        batch (also of one).
     dense_output : bool
         Keep what :meth:`Solution.at` needs to give the state at any time of t_span.
     events : callable or list of callables, optional
-        ``event(t, Omega, Gamma, g) -> (...)`` with scipy's ``terminal`` and ``direction`` attributes
-        (see :mod:`liesuslov.integrators.events`); crossings in ``sol.events``.
+        ``event(t, Omega, Gamma, g) -> (...)`` with scipy's ``terminal`` and ``direction`` attributes,
+        called with the batch axes leading (see :mod:`liesuslov.integrators.events`); crossings in
+        ``sol.events``.
     form : str
         Force a model form ("auto", "reduced", "eigenspace", "symmetric", "multiplier").
     first_step : float, optional
@@ -163,11 +165,10 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         step0 = check_positive(h, "h")
     te = check_t_eval(t_eval, t0, t1)
     model, x0, G0, g_init, batch_shape = _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form)
-    B = math.prod(batch_shape)
     plan = plan_for(meth.tableau)
     problem = _problem(model, plan, chart, x0, G0, g_init, batch_shape, t0, t1, meth.adaptive, step0, rtol, atol,
                        int(max_steps), te, events, bool(reproject))
-    if te is None and B > 1:
+    if te is None and batch_shape != ():  # a batch (also of one) reports the two ends; one trajectory every step
         problem.t_eval = np.array([t0, t1])
     solver, used, reason = _choose_solver(problem, backend)
     start = time.perf_counter()
@@ -256,7 +257,7 @@ def _problem(model, plan, chart, x0, G0, g_init, batch_shape, t0, t1, adaptive, 
     problem = Problem(model=model, mode=mode, chart=chart if mode != "none" else None, kind=None, skew=skew,
                       plan=plan, k=k, m=m, q=q, B=B, xi0=xi, G0=G, gamma=gamma, t0=t0, t1=t1, adaptive=adaptive,
                       h=float(step0), rtol=float(rtol), atol=float(atol), max_steps=max_steps, t_eval=te,
-                      reproject=reproject)
+                      reproject=reproject, batch_shape=tuple(batch_shape))
     _add_events(problem, events, batch_shape)
     return problem
 
@@ -370,11 +371,14 @@ def _run(solver, P: Problem, progress: bool) -> RawResult:
 def _solution(raw: RawResult, P: Problem, batch_shape, method, chart, wall, reason) -> Solution:
     """Turn a solver's flat result into the user's arrays (time axis first, then the batch axes)."""
     model = P.model
+    if P.t_eval is None and raw.status[0] == STATUS_TERMINAL:
+        raw = _with_stop_point(raw, P)
     N = raw.t.shape[0]
-    bs = batch_shape if P.t_eval is not None else (1,) * len(batch_shape)
-    xi = raw.xi.reshape((N,) + bs + (P.k,))
+    xi = raw.xi.reshape((N,) + tuple(batch_shape) + (P.k,))
     omega = model.omega_coords(xi)
-    g, Gamma = _group_arrays(P, raw.G, (N,) + bs, lambda: np.broadcast_to(np.arange(P.B).reshape(batch_shape), bs))
+    if np.count_nonzero(raw.status):  # the components outside D are 0, not NaN, after a stop: NaN as well
+        omega = np.where(np.isnan(xi).any(axis=-1, keepdims=True), np.nan, omega)
+    g, Gamma = _group_arrays(P, raw.G, (N,) + tuple(batch_shape), lambda: np.arange(P.B).reshape(batch_shape))
     status = raw.status.reshape(batch_shape)
     stats = {"nfev": _total(raw.nfev), "steps": _total(raw.steps), "rejected": _total(raw.rejected),
              "method": method, "chart": P.chart, "form": model.form, "backend": raw.backend,
@@ -392,6 +396,22 @@ def _solution(raw: RawResult, P: Problem, batch_shape, method, chart, wall, reas
     return Solution(t=np.asarray(raw.t, dtype=float), xi=xi, omega=omega, Gamma=Gamma, g=g, stats=stats,
                     status=status, message=_message(raw), n=model.n, algebra_name=model.algebra.name,
                     events=records)
+
+
+def _with_stop_point(raw: RawResult, P: Problem) -> RawResult:
+    """One trajectory reported at every step, stopped by a terminal event: its last point is the event's (the
+    state at ``t_stop``, as scipy's ``solve_ivp`` ends ``sol.t`` there)."""
+    t_stop = raw.t_stop[0]
+    if raw.t.size and raw.t[-1] == t_stop:
+        return raw
+    for e in np.flatnonzero(P.event_terminal):
+        at = np.flatnonzero(raw.event_t[e] == t_stop)
+        if at.size:
+            i = at[0]
+            return replace(raw, t=np.append(raw.t, t_stop),
+                           xi=np.concatenate([raw.xi, raw.event_xi[e][i].reshape(1, 1, -1)]),
+                           G=np.concatenate([raw.G, raw.event_G[e][i].reshape(1, 1, -1)]))
+    return raw
 
 
 def _total(a: np.ndarray) -> int:
@@ -444,12 +464,12 @@ class _Replay:
         ts = as_float_array(t, "t")
         ts = ts.reshape(-1)
         lo, hi = min(P.t0, P.t1), max(P.t0, P.t1)
-        if ts.size == 0 or ts.min() < lo or ts.max() > hi:
+        if ts.size == 0:
+            raise ValueError("sol.at(t): t is empty; pass at least one time within t_span")
+        if ts.min() < lo or ts.max() > hi:
             raise ValueError(f"sol.at(t): every t must lie within t_span = ({P.t0}, {P.t1})")
         order = np.argsort(P.direction * ts, kind="stable")
         uniq, inverse = np.unique(P.direction * ts[order], return_inverse=True)
-        from dataclasses import replace
-
         Q = replace(P, t_eval=P.direction * uniq)
         raw = self.solver.solve(Q)
         sol = _solution(raw, Q, self.batch_shape, self.method, self.chart, 0.0, "dense output")

@@ -77,7 +77,8 @@ class Problem:
         Per trajectory (accepted + rejected steps).
     t_eval : (M,) or None
         Output times (sorted in the direction of integration); None: the solver records every accepted
-        step (``B == 1`` only) — the front door passes ``t_eval = (t0, t1)`` for a batch without t_eval.
+        step (``B == 1`` only) — the front door passes ``t_eval = (t0, t1)`` for a batch without t_eval
+        (any initial data with batch axes, also of one).
     events : list of callables
         The user's event functions (numpy solver).
     event_linear : list over events of ``(coef (B, k + q), offset (B,))`` or None
@@ -114,6 +115,7 @@ class Problem:
     event_terminal: np.ndarray | None = None
     event_direction: np.ndarray | None = None
     reproject: bool = True
+    batch_shape: tuple = ()
 
     @property
     def direction(self) -> float:
@@ -130,19 +132,53 @@ class Problem:
             return orthonormalize(G) if self.skew else G
         return G / np.linalg.norm(G, axis=-1, keepdims=True)
 
-    def user_state(self, b: int, xi: np.ndarray, G: np.ndarray | None):
-        """``(Omega, Gamma, g)`` of trajectory b as an event callable sees them (batch axis of length 1):
-        Omega as matrices on so(n) (coordinates elsewhere), Gamma (1, n) or None, g (1, m, m) or None."""
-        x = np.reshape(xi, (1, -1))
-        Omega = self.model.omega_matrix(x) if self.skew else self.model.omega_coords(x)
+    def user_state(self, xi: np.ndarray, G: np.ndarray | None):
+        """``(Omega, Gamma, g)`` of the whole batch as an event callable sees them, from ``xi`` (B, k) and ``G``
+        (B, q): Omega (B, n, n) on so(n) (coordinates (B, d) elsewhere), Gamma (B, n) or None, g (B, m, m) or
+        None."""
+        Omega = self.model.omega_matrix(xi) if self.skew else self.model.omega_coords(xi)
         Gamma = g = None
         if self.mode == "g":
-            g = np.reshape(G, (1, self.m, self.m))
+            g = np.reshape(G, (-1, self.m, self.m))
             if self.model.has_gamma:
-                Gamma = np.matmul(self.gamma[b][None, None, :], g)[:, 0, :]
+                Gamma = np.matmul(self.gamma[:, None, :], g)[:, 0, :]  # Gamma = g^T gamma
         elif self.mode == "gamma":
-            Gamma = np.reshape(G, (1, -1))
+            Gamma = np.reshape(G, (xi.shape[0], -1))
         return Omega, Gamma, g
+
+    def call_event(self, e: int, t: np.ndarray, xi: np.ndarray, G: np.ndarray | None) -> np.ndarray:
+        """The values (B,) of the user's event ``e`` at times ``t`` (B,) and states ``xi`` (B, k), ``G`` (B, q).
+
+        It is called once, with the batch axes leading (as documented): ``t`` a float for one trajectory
+        (batch shape ``()``), else an array of the batch shape; Omega, Gamma and g of shapes
+        ``batch_shape + (...)`` (:meth:`user_state`).
+
+        Raises
+        ------
+        ValueError
+            If the returned values do not broadcast to the batch shape.
+        TypeError
+            If they are not real numbers.
+        """
+        shape = self.batch_shape
+
+        def lead(a):
+            return None if a is None else a.reshape(shape + a.shape[1:])
+
+        Omega, Gamma, g = self.user_state(xi, G)
+        tt = float(t[0]) if shape == () else t.reshape(shape)
+        value = self.events[e](tt, lead(Omega), lead(Gamma), lead(g))
+        try:
+            value = np.asarray(value, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"events[{e}] must return real numbers, one per trajectory; got "
+                            f"{type(value).__name__}") from exc
+        try:
+            value = np.broadcast_to(value, shape)
+        except ValueError:
+            raise ValueError(f"events[{e}] returned values of shape {value.shape}; an event returns one value per "
+                             f"trajectory: shape {shape} (the batch shape of the initial data)") from None
+        return value.reshape(self.B)
 
     @property
     def n_events(self) -> int:

@@ -82,11 +82,15 @@ class Solution:
         """
         if self._dense is None:
             raise ValueError("sol.at(t) needs integrate(..., dense_output=True)")
+        if self._dense is False:
+            raise ValueError("sol.at(t): this Solution was pickled or copied, and a copy keeps the arrays, not the "
+                             "dense output; call at() on the Solution integrate returned (or integrate again)")
         return self._dense(t)
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
-        state["_dense"] = None  # the replay holds the solver and the problem: not part of the result
+        if state["_dense"] is not None:  # the replay holds the solver and the problem: not part of the result
+            state["_dense"] = False  # (and at() says so)
         return state
 
     @property
@@ -96,7 +100,11 @@ class Solution:
             return None
         from ..algebra import so
 
-        return so(self.n).hat(self.omega)
+        Omega = so(self.n).hat(self.omega)
+        gone = np.isnan(self.omega).any(axis=-1)  # after a stop: NaN on the diagonal too
+        if gone.any():
+            Omega[gone] = np.nan
+        return Omega
 
     def __repr__(self) -> str:
         shape = self.omega.shape

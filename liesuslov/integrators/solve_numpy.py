@@ -11,9 +11,9 @@ rejected. The parts:
   serves the batch;
 * output (:class:`_Output`): t_eval served by the continuous extension (vectorised over every
   (trajectory, output time) pair of a step), or every step for a single trajectory;
-* events (:class:`_Events`): values at accepted points (vectorised for :class:`~.events.LinearEvent`),
-  sign changes found for the whole batch at once, roots by Brent's method on the continuous extension
-  (per trajectory, in Python, for the few steps with a crossing).
+* events (:class:`_Events`): values at accepted points (one call on the whole batch), crossings found for
+  the whole batch at once, roots located by Illinois on the continuous extension — every crossing of a
+  loop's accepted steps at once, each by its own iteration (the rules of :mod:`.control`, as the kernel's).
 
 A trajectory's numbers do not depend on its batch mates or on B: no computation mixes trajectories
 (see :mod:`.rkmk`), and one trajectory is a batch of one on the same code. When trajectories end, the
@@ -99,42 +99,45 @@ class _Events:
         self.P = P
         self.E = P.n_events
         self.found = [[] for _ in range(self.E)]  # per event: (trajectory, t, xi (k,), G (q,))
+        if any(lin is None for lin in P.event_linear):
+            # a user callable sees the whole batch: each trajectory at its last accepted point, but those asked about
+            self.last_t, self.last_xi, self.last_G = np.full(P.B, P.t0), P.xi0.copy(), P.G0.copy()
 
-    def values(self, t: np.ndarray, xi: np.ndarray, G: np.ndarray | None, traj: np.ndarray,
-               which=None) -> np.ndarray:
-        """Event values (R, E) — or (R, len(which)) — at times ``t`` (R,) and states of trajectories ``traj``.
+    def values(self, t: np.ndarray, xi: np.ndarray, G: np.ndarray | None, traj: np.ndarray, which=None,
+               accepted: bool = False) -> np.ndarray:
+        """Event values (R, E) — or (R, len(which)) — at times ``t`` (R,) and states of the R distinct
+        trajectories ``traj``; ``accepted``: they are accepted points (the trajectories' last points from now on).
 
-        A :class:`~.events.LinearEvent` is one stacked dot product per trajectory; a user callable is
-        called for each trajectory with a batch axis of length 1, as it is documented to be.
+        A :class:`~.events.LinearEvent` is one stacked dot product per trajectory; a user callable is called
+        once, on the whole batch (:meth:`~.problem.Problem.call_event`), with the other trajectories at their
+        last accepted points — so it may use per-trajectory parameters of the batch's shape.
         """
         P = self.P
         R = traj.size
         which = range(self.E) if which is None else which
-        z = xi if G is None else np.concatenate([xi, G.reshape(R, -1)], axis=1)
-        z = np.ascontiguousarray(z)
+        Gf = None if G is None else G.reshape(R, -1)
+        z = np.ascontiguousarray(xi if G is None else np.concatenate([xi, Gf], axis=1))
         out = np.empty((R, len(which)))
+        batch = None
         for c, e in enumerate(which):
             lin = P.event_linear[e]
             if lin is not None:
                 coef, off = lin
                 out[:, c] = np.matmul(coef[traj][:, None, :], z[:, :, None])[:, 0, 0] - off[traj]
-            else:
-                fn = P.events[e]
-                for r in range(R):
-                    Gr = None if G is None else G[r:r + 1]
-                    out[r, c] = float(np.reshape(fn(float(t[r]), *P.user_state(int(traj[r]), xi[r:r + 1], Gr)), -1)[0])
+                continue
+            if batch is None:
+                T, X, GG = ((self.last_t, self.last_xi, self.last_G) if accepted
+                            else (self.last_t.copy(), self.last_xi.copy(), self.last_G.copy()))
+                T[traj], X[traj] = t, xi
+                if Gf is not None:
+                    GG[traj] = Gf
+                batch = (T, X, None if Gf is None else GG)
+            out[:, c] = P.call_event(e, *batch)[traj]
         return out
 
-    def crossings(self, old: np.ndarray, new: np.ndarray, at_start: np.ndarray) -> np.ndarray:
-        """(R, E) bool: the events whose value changed sign over the step, in their direction (scipy's rule).
-
-        Starting on the surface (a zero at t0) is not a crossing."""
-        d = self.P.event_direction[None, :]
-        moved = old != new
-        up = (old <= 0.0) & (new >= 0.0) & moved
-        down = (old >= 0.0) & (new <= 0.0) & moved
-        out = (up & (d >= 0)) | (down & (d <= 0))
-        return out & ~(at_start[:, None] & (old == 0.0))
+    def crossings(self, old: np.ndarray, new: np.ndarray) -> np.ndarray:
+        """(R, E) bool: the events the step crossed (:func:`.control.crossed`)."""
+        return control.crossed(old, new, self.P.event_direction[None, :])
 
     def record(self, e: int, traj: int, t: float, xi: np.ndarray, G: np.ndarray | None) -> None:
         g = np.zeros(0) if G is None else np.reshape(G, -1).copy()
@@ -159,11 +162,11 @@ class _Solve:
     Row arrays (A rows): ``idx`` (the trajectory), ``t``, ``h_abs``, ``after_reject``, ``steps``,
     ``rejected``, ``nfev``, ``xi`` (A, k), ``G`` (A, m, m) / (A, n) / None, ``gamma`` (A, n) / None,
     ``first`` (A, k) and ``have_first`` (the field at the current point, reused as the next stage 0),
-    ``ev_old`` (A, E), ``at_start``, ``next_out`` (first t_eval index not yet written), ``live``.
+    ``ev_old`` (A, E), ``next_out`` (first t_eval index not yet written), ``live``.
     """
 
     _ROWS = ("idx", "t", "h_abs", "after_reject", "steps", "rejected", "nfev", "xi", "G", "gamma", "first",
-             "have_first", "ev_old", "at_start", "next_out", "live")
+             "have_first", "ev_old", "next_out", "live")
 
     def __init__(self, P: Problem, done) -> None:
         self.P, self.done_cb = P, done
@@ -197,7 +200,6 @@ class _Solve:
         self.first = np.zeros((B, P.k))
         self.have_first = np.zeros(B, dtype=bool)
         self.ev_old = np.zeros((B, self.ev.E))
-        self.at_start = np.ones(B, dtype=bool)
         self.next_out = np.zeros(B, np.int64)
         self.live = np.ones(B, dtype=bool)
 
@@ -265,7 +267,8 @@ class _Solve:
                            None if self.G is None else self.G[live])
             self.next_out[:] = 1
         if self.ev.E:
-            self.ev_old[live] = self.ev.values(self.t[live], self.xi[live], self._rows(self.G, live), self.idx[live])
+            self.ev_old[live] = self.ev.values(self.t[live], self.xi[live], self._rows(self.G, live), self.idx[live],
+                                                accepted=True)
         if not P.adaptive:
             self.h_abs[:] = P.h
             # fixed step: the grid t0 + i h (no accumulated sums), the last step shortened to land on t1
@@ -389,8 +392,8 @@ class _Solve:
             n_out = end - self.next_out[sel]
         need = None if n_out is None else out.end(t_new, closed=False) > self.next_out[sel]
         if ev.E:
-            ev_new = ev.values(t_new, xi1, G1, self.idx[sel])
-            crossed = ev.crossings(self.ev_old[sel], ev_new, self.at_start[sel])
+            ev_new = ev.values(t_new, xi1, G1, self.idx[sel], accepted=True)
+            crossed = ev.crossings(self.ev_old[sel], ev_new)
             hits = crossed.any(axis=1)
             need = hits if need is None else need | hits
         some_out = n_out is not None and n_out.any()
@@ -406,12 +409,7 @@ class _Solve:
         # events: roots on the extension, per trajectory (few steps have a crossing)
         stop_t = None
         if ev.E and hits.any():
-            stop_t = np.full(R, np.nan)
-            ev_old = self.ev_old[sel]
-            for r in np.flatnonzero(hits):
-                stop_t[r] = self._locate(sub, pos[r], int(self.idx[rows[r]]), np.flatnonzero(crossed[r]), t[r], h[r],
-                                         t_new[r], ev_old[r], ev_new[r], xi1[r:r + 1],
-                                         None if G1 is None else G1[r:r + 1])
+            stop_t = self._locate(sub, pos, self.idx[rows], crossed, t, h, t_new, self.ev_old[sel], ev_new, xi1, G1)
         # output: every (trajectory, t_eval index) pair of these steps at once
         if some_out:
             self._write(rows, n_out, t, h, t_new, xi1, G1, sub, pos, stop_t)
@@ -448,7 +446,6 @@ class _Solve:
             out.record(float(t_new[0]), xi1, G1)
         if ev.E:
             self.ev_old[sel] = ev_new
-            self.at_start[sel] = False
         if P.adaptive:
             h_new = np.abs(h) * control.accept_factor(norm, plan.error_exponent, self.after_reject[sel])
             self.h_abs[sel] = np.where(hit, np.maximum(self.h_abs[sel], h_new), h_new)
@@ -478,43 +475,61 @@ class _Solve:
             x, g = self.st.dense(sub, (te[inner] - t[a]) / h[a], pos[a])
             out.write(i[inner], traj[a], x, g)
 
-    def _locate(self, sub: Step, j: int, b: int, crossed: np.ndarray, t: float, h: float, t_new: float,
-                ev_old: np.ndarray, ev_new: np.ndarray, x1: np.ndarray, G1) -> float:
-        """Locate each crossing of trajectory b on the extension (row ``j`` of ``sub``), record them in
-        time order; the first terminal time, or NaN."""
-        from scipy.optimize import brentq  # loaded when an event is first located
-
+    def _locate(self, sub: Step, pos: np.ndarray, traj: np.ndarray, crossed: np.ndarray, t: np.ndarray,
+                h: np.ndarray, t_new: np.ndarray, ev_old: np.ndarray, ev_new: np.ndarray, xi1: np.ndarray,
+                G1) -> np.ndarray:
+        """Locate the crossings ``crossed`` (R, E) of the R accepted steps of trajectories ``traj`` — all at once, on
+        their continuous extensions (rows ``pos`` of ``sub``), each (step, event) pair by its own Illinois
+        iteration (:mod:`.control`'s rules, as the kernel's) — and record them per trajectory in time order, up
+        to its first terminal one. Returns (R,) the terminal times, NaN where none stopped."""
         P, st, ev = self.P, self.st, self.ev
-        row = np.array([j])
-        found = []
-        for e in crossed:
-            def value(theta, e=e):
-                if theta == 1.0:
-                    return ev_new[e]
-                x, g = st.dense(sub, np.array([theta]), row)
-                return ev.values(np.array([t + theta * h]), x, g, np.array([b]), which=[e])[0, 0]
-
-            if ev_old[e] == 0.0:
-                theta = 0.0
-            elif ev_new[e] == 0.0:
-                theta = 1.0
-            else:
-                xtol = 4.0 * abs(math.nextafter(t_new, math.inf) - t_new) / abs(h)
-                theta = brentq(value, 0.0, 1.0, xtol=max(xtol, 1e-300), rtol=4 * np.finfo(float).eps, maxiter=200)
-            found.append((theta, int(e)))
-        found.sort()
-        stop = None
-        for theta, e in found:
-            if stop is not None and theta > stop:
+        r, e = np.nonzero(crossed)  # the (step, event) pairs
+        lo, hi = np.zeros(r.size), np.ones(r.size)
+        flo, fhi = ev_old[r, e], ev_new[r, e]
+        vlo, vhi = flo.copy(), fhi.copy()
+        side = np.zeros(r.size, np.int64)
+        theta = np.where(fhi == 0.0, 1.0, -1.0)  # (a step that starts at 0 is not a crossing)
+        tr, hr = t[r], h[r]
+        active = theta < 0.0
+        for _ in range(300):
+            a = np.flatnonzero(active)
+            c = control.secant_point(lo[a], hi[a], flo[a], fhi[a])
+            inside = (lo[a] < c) & (c < hi[a])  # not when the bracket is down to adjacent floats
+            active[a[~inside]] = False
+            a, c = a[inside], c[inside]
+            if a.size == 0:
                 break
-            if theta == 1.0:
-                tc, x, g = t_new, x1, G1
-            else:
-                tc = t + theta * h
-                x, g = st.dense(sub, np.array([theta]), row)
-            ev.record(e, b, tc, x, g)
-            if P.event_terminal[e]:
-                stop = theta
-        if stop is None:
-            return math.nan
-        return t_new if stop == 1.0 else t + stop * h
+            x, g = st.dense(sub, c, pos[r[a]])
+            fc = np.empty(a.size)
+            for ee in np.unique(e[a]):  # (a trajectory appears once per event)
+                m = e[a] == ee
+                fc[m] = ev.values(tr[a[m]] + c[m] * hr[a[m]], x[m], None if g is None else g[m], traj[r[a[m]]],
+                                  which=[ee])[:, 0]
+            zero = fc == 0.0
+            theta[a[zero]] = c[zero]
+            active[a[zero]] = False
+            a, c, fc = a[~zero], c[~zero], fc[~zero]
+            lo[a], hi[a], flo[a], fhi[a], vlo[a], vhi[a], side[a] = control.illinois_update(
+                lo[a], hi[a], flo[a], fhi[a], vlo[a], vhi[a], side[a], c, fc)
+            active[a[control.bracket_closed(tr[a], hr[a], lo[a], hi[a], c, P.direction)]] = False
+        open_ = theta < 0.0
+        theta[open_] = control.closest_end(lo[open_], hi[open_], vlo[open_], vhi[open_])
+        # the states at the roots: the step's end itself at theta = 1, else the extension
+        inner = np.flatnonzero(theta < 1.0)
+        xs = xi1[r].copy()
+        Gs = None if G1 is None else G1[r].copy()
+        if inner.size:
+            x, g = st.dense(sub, theta[inner], pos[r[inner]])
+            xs[inner] = x
+            if Gs is not None:
+                Gs[inner] = g
+        stop = np.full(crossed.shape[0], np.nan)  # theta of each step's first terminal crossing
+        for i in np.lexsort((e, theta, r)):  # by step, then time, then event
+            j = r[i]
+            if stop[j] < theta[i]:  # past this trajectory's terminal crossing
+                continue
+            tc = t_new[j] if theta[i] == 1.0 else t[j] + theta[i] * h[j]
+            ev.record(int(e[i]), int(traj[j]), tc, xs[i], None if Gs is None else Gs[i])
+            if P.event_terminal[e[i]] and np.isnan(stop[j]):
+                stop[j] = theta[i]
+        return np.where(stop == 1.0, t_new, t + stop * h)

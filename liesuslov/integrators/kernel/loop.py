@@ -45,13 +45,18 @@ from .common import (
     _NHEAD,
     _accept_factor,
     _borrow,
+    _bracket_closed,
+    _closest_end,
     _combine,
+    _crossed,
+    _illinois_update,
     _initial_step,
     _jit,
     _jit_entry,
     _probe_step,
     _reject_factor,
     _scale,
+    _secant_point,
     _view,
 )
 from .group import _alg_act, _alg_dinv, _alg_sq, _alg_state, _alg_update, _field, _field_call, _omega_alg
@@ -134,18 +139,11 @@ def _event_values(bi, ev_coef, ev_off, xi, G, out):
 
 
 @_jit
-def _crossings(gold, gnew, at_start, ev_dir, act_e):
-    """The events whose value changed sign over the step, in their direction (scipy's rule); their count."""
+def _crossings(gold, gnew, ev_dir, act_e):
+    """The events the step crossed (:func:`~liesuslov.integrators.control.crossed`), in ``act_e``; their count."""
     n_act = 0
     for e in range(gold.shape[0]):
-        go = gold[e]
-        gn = gnew[e]
-        if go == 0.0 and at_start:  # starting on the surface is not a crossing
-            continue
-        up = go <= 0.0 and gn >= 0.0 and go != gn
-        down = go >= 0.0 and gn <= 0.0 and go != gn
-        d = ev_dir[e]
-        if (up and d >= 0) or (down and d <= 0):
+        if _crossed(gold[e], gnew[e], ev_dir[e]):
             act_e[n_act] = e
             n_act += 1
     return n_act
@@ -269,20 +267,14 @@ def _locate(family, kind, chart, skew, mode, bi, n_act, act_e, act_th, gold, gne
         hi = 1.0
         flo = gold[e]
         fhi = gnew[e]
-        tlo = flo
-        thi = fhi
+        vlo = flo
+        vhi = fhi
         side = 0
-        root = -1.0
-        if flo == 0.0:
-            root = 0.0
-        elif fhi == 0.0:
-            root = 1.0
+        root = 1.0 if fhi == 0.0 else -1.0  # (a step that starts at 0 is not a crossing)
         for _it in range(300):
             if root >= 0.0:
                 break
-            cth = (lo * fhi - hi * flo) / (fhi - flo)
-            if not (lo < cth < hi):
-                cth = 0.5 * (lo + hi)
+            cth = _secant_point(lo, hi, flo, fhi)
             if cth <= lo or cth >= hi:
                 break
             # the value at cth, on the continuous extension (the group part only when the event reads it)
@@ -297,24 +289,11 @@ def _locate(family, kind, chart, skew, mode, bi, n_act, act_e, act_th, gold, gne
             if fc == 0.0:
                 root = cth
                 break
-            if (fc > 0.0) == (fhi > 0.0):
-                hi = cth
-                fhi = fc
-                thi = fc
-                if side == 1:
-                    flo *= 0.5
-                side = 1
-            else:
-                lo = cth
-                flo = fc
-                tlo = fc
-                if side == -1:
-                    fhi *= 0.5
-                side = -1
-            if abs(h) * (hi - lo) <= 4.0 * _ulp(t + cth * h, direction):
+            lo, hi, flo, fhi, vlo, vhi, side = _illinois_update(lo, hi, flo, fhi, vlo, vhi, side, cth, fc)
+            if _bracket_closed(t, h, lo, hi, cth, direction):
                 break
         if root < 0.0:
-            root = lo if abs(tlo) < abs(thi) else hi
+            root = _closest_end(lo, hi, vlo, vhi)
         act_th[ia] = root
     # insertion sort by theta (ties: event order)
     for ia in range(1, n_act):
@@ -623,7 +602,6 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
         n_fixed = 0
         if not adaptive and fail == 0:
             n_fixed = max(1, int(math.ceil(abs(t1 - t0) / hfix - 1e-9)))
-        at_start = True
         t_fail = t0
         while fail == 0 and t1 != t0:
             if nsteps + nrej >= max_steps:
@@ -735,7 +713,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                 t_new = t1 if last else t + h
                 if E > 0:
                     _event_values(bi, ev_coef, ev_off, xi1, G1, gnew)
-                    n_act = _crossings(gold, gnew, at_start, ev_dir, act_e)
+                    n_act = _crossings(gold, gnew, ev_dir, act_e)
                 if n_act > 0 or (ie < NT and direction * (t_eval[ie] - t_new) < 0.0):
                     # an output time inside the step (one at t_new is the step's end itself) or a crossing:
                     # the continuous extension, stage s (a copy for FSAL methods) and the extra stages
@@ -794,7 +772,6 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                 f0_ok = True
             else:
                 f0_ok = False
-            at_start = False
             if reproj and mode != 0 and nsteps % renorm == 0:
                 f0_ok = False  # the state moved: stage 0 is evaluated again
                 _reproject(mode, G, Wg)
