@@ -8,7 +8,7 @@ import json
 import os
 import pickle
 import sys
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -50,7 +50,9 @@ def _assert_same(ens, sol, final_only=False):
     """Bitwise equal. Before the per-trajectory integrate, only to 1e-13: its batch-vectorised numpy stepper
     (which backend="auto" picks above 200 trajectories, or without numba) rounds differently per batch size."""
     rows = slice(-1, None) if final_only else slice(None)
-    same = np.array_equal if _per_trajectory() else (lambda a, b: np.allclose(a, b, rtol=0, atol=1e-13))
+    # equal_nan: every value after a terminal event stopped a trajectory is NaN
+    same = ((lambda a, b: np.array_equal(a, b, equal_nan=True)) if _per_trajectory() else
+            (lambda a, b: np.allclose(a, b, rtol=0, atol=1e-13, equal_nan=True)))
     assert np.array_equal(ens.t, sol.t[rows])
     for name in ("omega", "xi", "Gamma", "g", "Omega"):
         a, b = getattr(ens, name), getattr(sol, name)
@@ -91,6 +93,13 @@ def uniform_sampler(rng, size):
     Omega0 = rng.uniform(-1.0, 1.0, size=(size, 2)) @ system.constraints.basis
     G = rng.normal(size=(size, 3))
     return {"Omega0": Omega0, "Gamma0": G / np.linalg.norm(G, axis=-1, keepdims=True)}
+
+
+def fail_short_chunks(sol):
+    """A module-level reduce that fails (deterministically) on every chunk of fewer than 7 trajectories."""
+    if sol.omega.shape[1] < 7:
+        raise RuntimeError("a short chunk")
+    return sol
 
 
 def shifted_final(sol):
@@ -146,6 +155,32 @@ def test_stats_sum_the_chunks_counts():
     for key in ("steps", "nfev", "rejected"):
         assert many[key] == sum(p[key] for p in parts), key
     assert many["method"] == "rkmk4" and many["batch"] == 20 and many["executor"] == "none"
+
+
+def test_events_come_back_as_in_a_solution(pool, tmp_path):
+    """The crossings of events= were computed on the workers and dropped; now ens.events is a Solution's."""
+    system, Omega0, Gamma0 = _initial()
+    stop = ls.integrators.gamma_crossing(3, index=0)
+    stop.terminal = True
+    # and a plane per trajectory (coefficients with the batch axes: each chunk gets its rows of them)
+    events = [stop, ls.integrators.gamma_crossing(3, index=1),
+              ls.integrators.return_plane(system, Omega0, np.broadcast_to(Gamma0, Omega0.shape[:-1] + (3,)))]
+    span = (0.0, 20.0)
+    sol = ls.integrate(system, Omega0, span, Gamma0=Gamma0, t_eval=list(span), events=events, **FIXED)
+    assert sum(len(r) for r in sol.events) > 20 and np.any(sol.status == 1)
+    runs = [ensemble(system, Omega0, span, Gamma0=Gamma0, chunk_size=cs, executor=ex, store=st, events=events,
+                     **FIXED) for cs, ex, st in ((None, None, None), (3, pool, None), (7, None, tmp_path / "s"))]
+    for ens in (*runs, open_ensemble(tmp_path / "s"), pickle.loads(pickle.dumps(runs[-1])), runs[1].to_solution()):
+        _assert_same(ens, sol)
+        assert len(ens.events) == 3
+        for a, b in zip(ens.events, sol.events, strict=True):
+            for f in ("t", "index", "omega", "Gamma", "g"):
+                x, y = getattr(a, f), getattr(b, f)
+                assert (x is None) == (y is None) and (x is None or np.array_equal(x, y)), f
+            assert a.Omega.shape == b.Omega.shape
+    assert ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, **FIXED).events == []
+    with pytest.raises(TypeError, match="dense_output"):
+        ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, dense_output=True, **FIXED)
 
 
 # ---------------------------------------------------------------------------- a process pool
@@ -246,6 +281,64 @@ def test_store_round_trip_and_partial_store(tmp_path):
         open_ensemble(tmp_path)
 
 
+def test_a_store_killed_mid_run_reopens_with_the_counts_of_the_computed_trajectories(tmp_path):
+    """SIGKILL after 3 of 20 chunks: the reopened store has nfev/steps/rejected (as a Solution's), summed over
+    the 15 trajectories computed, and the run's seed (drawn fresh: seed=None), so its initial data can be redrawn."""
+    import signal
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    store = tmp_path / "killed"
+    script = f"""
+import os, signal
+from tests.test_ensemble import FIXED, _system, uniform_sampler
+from liesuslov.ensembles import ensemble
+calls = []
+def kill_at_the_fourth_chunk(sol):  # executor=None: chunk i is written to the store before chunk i + 1 runs
+    calls.append(1)
+    if len(calls) == 4:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return sol
+ensemble(_system(), None, (0.0, 0.2), sampler=uniform_sampler, n=100, chunk_size=5, store={str(store)!r},
+         reduce=kill_at_the_fourth_chunk, t_eval=[0.0, 0.2], **FIXED)
+"""
+    res = subprocess.run([sys.executable, "-c", script], cwd=root, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "PYTHONPATH": str(root)})
+    assert res.returncode == -signal.SIGKILL, res.stderr[-3000:]
+    ens = open_ensemble(store)
+    assert not ens.complete and "17 of 20 chunks missing" in ens.message
+    flat = ens.status.reshape(-1)
+    assert np.all(flat[:15] == 0) and np.all(flat[15:] == -1)
+    st = ens.stats
+    assert {"nfev", "steps", "rejected"} <= set(st) and st["steps"] == 15 * 20 and st["nfev"] > 0
+    assert st["chunks"] == 20 and st["batch"] == 100 and st["method"] == "rkmk4" and st["failed_chunks"] == []
+    init = draw(uniform_sampler, 100, seed=st["seed"])
+    O, G = init["Omega0"][:15], init["Gamma0"][:15]
+    parts = [ls.integrate(_system(), O[a:a + 5], (0.0, 0.2), Gamma0=G[a:a + 5], t_eval=[0.0, 0.2], **FIXED)
+             for a in range(0, 15, 5)]
+    for key in ("nfev", "steps", "rejected"):
+        assert st[key] == sum(p.stats[key] for p in parts), key
+    assert np.array_equal(ens.omega[:, :15], np.concatenate([p.omega for p in parts], axis=1))
+    assert np.all(np.isnan(ens.omega[:, 15:]))
+
+
+def test_a_finished_store_with_failed_chunks_is_complete_and_counts_are_always_there(tmp_path):
+    system, Omega0, Gamma0 = _initial()  # 20 trajectories in chunks of 7, 7, 6: the last one fails
+    kw = dict(Gamma0=Gamma0, chunk_size=7, reduce=fail_short_chunks, **FIXED)
+    mem = ensemble(system, Omega0, T_SPAN, **kw)
+    disk = ensemble(system, Omega0, T_SPAN, store=tmp_path / "s", **kw)
+    back = open_ensemble(tmp_path / "s")
+    for ens in (mem, disk, back):
+        assert ens.complete and not ens.success, ens.message  # finished: the failed chunk is not "missing"
+        assert "missing" not in ens.message and "1 of 3 chunks failed" in ens.message
+        assert [f["chunk"] for f in ens.stats["failed_chunks"]] == [2]
+        assert np.all(ens.status.reshape(-1)[14:] == -1) and np.all(ens.status.reshape(-1)[:14] == 0)
+        assert ens.stats["steps"] == mem.stats["steps"] == 14 * 150
+    # every chunk failed: the counts are still there, zero
+    alone = ensemble(system, Omega0[0], T_SPAN, **kw)
+    assert alone.stats["failed_chunks"] and all(alone.stats[k] == 0 for k in ("nfev", "steps", "rejected"))
+
+
 def test_a_store_from_an_interrupted_run_opens(tmp_path):
     system, Omega0, Gamma0 = _initial()
     ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, chunk_size=5, store=tmp_path, **FIXED)
@@ -258,6 +351,9 @@ def test_a_store_from_an_interrupted_run_opens(tmp_path):
     part = open_ensemble(tmp_path)
     assert part.omega.shape == (2, 5, 4, 3) and part.algebra_name == "so(3)"
     assert np.count_nonzero(part.status == -1) == 5
+    for key in ("nfev", "steps", "rejected"):  # summed over the 3 chunks in the store
+        assert part.stats[key] == int(np.sum(part.stats["trajectory_" + key])), key
+    assert part.stats["steps"] == 15 * 150
 
 
 # ---------------------------------------------------------------------------- pickling and xarray
@@ -376,8 +472,36 @@ def test_bad_input(tmp_path):
         ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, method="rkmk4")
 
 
+def _lambda_system():
+    """A system that does not pickle: its potential is built from lambdas (V = Gamma_3^2 / 2)."""
+    J = ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0]))
+    V = ls.Potential(lambda G: 0.5 * G[..., 2] ** 2, lambda G: G * np.array([0.0, 0.0, 1.0]), n=3)
+    return ls.SuslovSystem(J, potential=V)
+
+
+def test_threads_and_this_process_need_no_pickling():
+    """executor=None and a ThreadPoolExecutor share the system in memory: a lambda potential is fine there."""
+    system = _lambda_system()
+    with pytest.raises((pickle.PicklingError, AttributeError)):
+        pickle.dumps(system)
+    _, Omega0, Gamma0 = _initial()
+    sol = ls.integrate(system, Omega0, T_SPAN, Gamma0=Gamma0, t_eval=[0.0, 1.5], **FIXED)
+    with ThreadPoolExecutor(2) as threads:
+        for ex in (None, threads):
+            ens = ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, chunk_size=3, executor=ex,
+                           reduce=lambda s: s, **FIXED)
+            _assert_same(ens, sol)
+        ens = ensemble(system, None, T_SPAN, sampler=lambda rng, size: uniform_sampler(rng, size), n=30, seed=2,
+                       chunk_size=4, executor=threads, **FIXED)
+        assert ens.success and ens.stats["executor"] == "ThreadPoolExecutor"
+
+
 def test_what_does_not_pickle_is_named_before_anything_runs(pool):
     system, Omega0, Gamma0 = _initial()
+    with pytest.raises(TypeError, match="system must pickle.*ProcessPoolExecutor"):
+        ensemble(_lambda_system(), Omega0, T_SPAN, Gamma0=Gamma0, executor=pool, **FIXED)
+    with pytest.raises(TypeError, match="events must pickle"):
+        ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, executor=pool, events=lambda t, O, G, g: G[..., 0], **FIXED)
     with pytest.raises(TypeError, match="sampler must pickle"):
         ensemble(system, None, T_SPAN, sampler=lambda rng, size: {}, n=5, executor=pool, **FIXED)
     with pytest.raises(TypeError, match="reduce must pickle"):

@@ -13,6 +13,17 @@ def _is_dask(executor) -> bool:
     return type(executor).__module__.split(".")[0] == "distributed" and hasattr(executor, "scheduler_info")
 
 
+def _pickles(executor) -> bool:
+    """Whether ``executor`` pickles what it is sent: every executor but None and a thread pool.
+
+    None runs the chunks here and a :class:`concurrent.futures.ThreadPoolExecutor` (or a subclass) runs them
+    on threads of this process, which share the system, the sampler and ``reduce`` as they are. Anything
+    else (a process pool, loky, an MPI pool, a Dask client, an executor this module does not know) is taken
+    to send them to other processes, pickled: :func:`ensemble` checks that they pickle before submitting.
+    """
+    return executor is not None and not isinstance(executor, cf.ThreadPoolExecutor)
+
+
 def _n_workers(executor) -> int:
     if executor is None:
         return 1

@@ -10,6 +10,8 @@ import numpy as np
 
 from .constants import (
     _ARRAYS,
+    _EVENT,
+    _EVENT_FIELDS,
     _STAT,
     _shard_name,
 )
@@ -31,12 +33,15 @@ class Ensemble:
     Omega : ndarray, shape (N, ..., n, n), or None off so(n)
     Gamma : ndarray, shape (N, ..., n), or None
     g : ndarray, shape (N, ..., m, m), or None
+    events : list of EventRecord
+        With ``events=`` (an option of integrate): the crossings, as a Solution's (empty without events).
     status : ndarray of int, shape (...)
         0 reached the end, 1 stopped by a terminal event, -1 failed (a failed or missing chunk too).
     success : bool
         Every status >= 0.
     stats : dict
-        ``nfev``, ``steps``, ``rejected`` summed over chunks; ``chunks``, ``chunk_size``,
+        ``nfev``, ``steps``, ``rejected`` summed over the chunks computed (always present, 0 if none was;
+        for a partial store the chunks in it, see :func:`open_ensemble`); ``chunks``, ``chunk_size``,
         ``failed_chunks`` (list of ``{"chunk", "start", "stop", "error"}``), ``retries``,
         ``wall_time``, ``executor``, ``seed`` (the entropy of a sampler run), and the first chunk's
         ``method``, ``chart``, ``form``, ``backend``; statistics integrate reports per trajectory
@@ -44,12 +49,14 @@ class Ensemble:
         NaN for a failed or missing chunk).
     batch_shape : tuple of int
     complete : bool
-        False for a store some of whose chunks are missing (their status is -1, their values NaN).
+        False for a store some of whose chunks are missing (their status is -1, their values NaN): a run
+        interrupted or still going. A finished run's failed chunks (status -1 too) are not missing.
     store : Path or None
     """
 
     def __init__(self, *, t, batch_shape, bounds, tails, stats, n=None, algebra_name="", message="",
-                 arrays=None, status=None, store=None, present=None, traj_stats=None):
+                 arrays=None, status=None, store=None, present=None, traj_stats=None, complete=None,
+                 n_events=0, event_parts=None):
         self._t = np.asarray(t, dtype=float)
         self.batch_shape = tuple(int(b) for b in batch_shape)
         self._bounds = [tuple(map(int, b)) for b in bounds]
@@ -64,6 +71,11 @@ class Ensemble:
         self._status = status
         self.store = None if store is None else Path(store)
         self._present = present
+        self._n_events = int(n_events)
+        # in memory: one dict of event arrays (shard keys) per finished chunk; a store reads its shards
+        self._event_parts = event_parts
+        # False only for a store with chunks missing (not for a finished run's failed chunks)
+        self._complete = (present is None or all(present)) if complete is None else bool(complete)
 
     # ------------------------------------------------------------------ arrays
     @property
@@ -93,7 +105,12 @@ class Ensemble:
             return None
         from ..algebra import so
 
-        return so(self.n).hat(self.omega)
+        omega = self.omega
+        Omega = so(self.n).hat(omega)
+        gone = np.isnan(omega).any(axis=-1)  # stopped, failed or missing: NaN on the diagonal too, as a Solution
+        if gone.any():
+            Omega[gone] = np.nan
+        return Omega
 
     @property
     def stats(self) -> dict:
@@ -110,6 +127,35 @@ class Ensemble:
                 with np.load(self._shard(i), allow_pickle=False) as z:
                     if _STAT + name in z.files:
                         out[a:b] = z[_STAT + name]
+        return out
+
+    @property
+    def events(self) -> list:
+        """One :class:`~liesuslov.EventRecord` per event function (``events=`` of integrate), as a Solution's:
+        the crossings of every trajectory computed, sorted by (index, t), ``index`` flat over the whole batch."""
+        from ..integrators import EventRecord
+
+        if self._event_parts is not None:
+            parts = self._event_parts
+        else:
+            parts = []
+            for i in range(len(self._bounds)):
+                if self._has(i):
+                    with np.load(self._shard(i), allow_pickle=False) as z:
+                        parts.append({k: z[k] for k in z.files if k.startswith(_EVENT)})
+        out = []
+        for j in range(self._n_events):
+            cols = {}
+            for f in _EVENT_FIELDS:
+                key = f"{_EVENT}{j}__{f}"
+                found = [p[key] for p in parts if key in p]
+                cols[f] = np.concatenate(found) if found else None
+            if cols["t"] is None:  # no chunk computed: empty arrays of the right trailing shapes
+                cols["t"], cols["index"] = np.empty(0), np.empty(0, dtype=np.int64)
+                cols["omega"] = np.empty((0,) + self._tails["omega"])
+            order = np.lexsort((cols["t"], cols["index"]))
+            cols = {f: None if v is None else v[order] for f, v in cols.items()}
+            out.append(EventRecord(n=self.n, algebra_name=self.algebra_name, **cols))
         return out
 
     @property
@@ -130,7 +176,7 @@ class Ensemble:
 
     @property
     def complete(self) -> bool:
-        return self._present is None or all(self._present)
+        return self._complete
 
     @property
     def _B(self) -> int:
@@ -173,7 +219,8 @@ class Ensemble:
         from ..integrators import Solution
 
         return Solution(t=self.t, xi=self.xi, omega=self.omega, Gamma=self.Gamma, g=self.g, stats=self.stats,
-                        status=self.status, message=self.message, n=self.n, algebra_name=self.algebra_name)
+                        status=self.status, message=self.message, n=self.n, algebra_name=self.algebra_name,
+                        events=self.events)
 
     def to_xarray(self):
         """An ``xarray.Dataset`` (dims ``time``, ``batch_0``, ..., components); needs ``liesuslov[xarray]``."""

@@ -18,18 +18,18 @@ from .checks import _nonneg_int, _positive_int
 from .constants import (
     _ARRAYS,
     _CORE,
+    _EVENT,
     _STAT,
-    _SUMMED,
     _USER_ERRORS,
     FORMAT,
     MANIFEST,
     REDUCTIONS,
     SAMPLER_BLOCK,
 )
-from .executors import _n_workers, _submit, _wait_first
+from .executors import _n_workers, _pickles, _submit, _wait_first
 from .result import Ensemble
 from .sampling import _seed_parts
-from .store import _write_manifest, _write_shard, open_ensemble
+from .store import _merge_stats, _write_manifest, _write_shard, open_ensemble
 from .tasks import _Task
 
 
@@ -43,7 +43,11 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     Parameters
     ----------
     system : SuslovSystem or Model
-        Must pickle when ``executor`` is not None (systems built from module-level callables do).
+        Must pickle (systems built from module-level callables do) unless ``executor`` is None or a
+        :class:`concurrent.futures.ThreadPoolExecutor`: the threads of this process share it as it is, so
+        there a potential built from lambdas works. Every other executor (a process pool, loky, an MPI
+        pool, a Dask client, or one not known here) is taken to pickle what it is sent; the same holds
+        for ``sampler`` and ``reduce``, and what does not pickle is a TypeError naming it before anything runs.
     Omega0 : array_like, shape (..., n, n) or (..., d), optional
         Initial data as for :func:`~liesuslov.integrate`; the batch axes of ``Omega0``, ``Gamma0`` and
         ``g0`` broadcast together. None with a ``sampler``.
@@ -57,7 +61,8 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
         Trajectories per task (default: a quarter of the batch per worker, at most 4096; the whole
         batch in one chunk when ``executor`` and ``store`` are None). It does not change the numbers.
     executor : None, concurrent.futures.Executor or dask.distributed.Client
-        None runs the chunks here, one after the other.
+        None runs the chunks here, one after the other; a ``ThreadPoolExecutor`` on its threads, nothing
+        pickled (the compiled kernel releases the GIL; numpy code on small arrays mostly holds it).
     store : str or PathLike, optional
         A directory the results stream to (created; an existing store is refused unless
         ``overwrite=True``). The returned Ensemble then reads from it lazily.
@@ -87,13 +92,15 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
         Replace an existing store.
     **options
         Passed to :func:`~liesuslov.integrate` (``method``, ``h``, ``rtol``, ``atol``, ``reconstruct``,
-        ``chart``, ``backend``, ...).
+        ``chart``, ``backend``, ``events``, ...); with ``events`` (callables that pickle, as ``system``) the
+        crossings come back in ``ens.events`` as in a Solution. ``dense_output=True`` is refused (TypeError):
+        nothing but the arrays at ``t_eval`` comes back.
 
     Returns
     -------
     Ensemble
         ``t`` (N,), ``omega`` (N, ..., d), ``Omega``, ``Gamma``, ``g``, ``status`` (...), ``success``,
-        ``stats``; the batch axes are those of the initial data (``(n,)`` with a sampler).
+        ``stats``, ``events``; the batch axes are those of the initial data (``(n,)`` with a sampler).
 
     Raises
     ------
@@ -111,6 +118,9 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     unknown = sorted(set(options) - allowed)
     if unknown:
         raise TypeError(f"unknown option(s) {unknown} for integrate; allowed: {sorted(allowed)}")
+    if options.get("dense_output"):
+        raise TypeError("dense_output=True is not supported by ensemble (only the arrays at t_eval come back); "
+                        "pass the times you need as t_eval")
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be True or False, got {type(progress).__name__}")
     retries = _nonneg_int(retries, "retries")
@@ -159,33 +169,46 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     max_in_flight = 3 * W if max_in_flight is None else _positive_int(max_in_flight, "max_in_flight")
     bounds = [(a, min(a + chunk_size, B)) for a in range(0, B, chunk_size)]
 
-    if executor is not None:  # a clear error here rather than a pickling traceback from a worker
-        for name, obj in (("system", system), ("sampler", sampler), ("reduce", reduce)):
+    if _pickles(executor):  # a clear error here rather than a pickling traceback from a worker
+        for name, obj in (("system", system), ("sampler", sampler), ("reduce", reduce),
+                          ("events", options.get("events"))):
             try:
                 pickle.dumps(obj)
             except Exception as exc:  # noqa: BLE001 - any pickling failure
-                raise TypeError(f"{name} must pickle to be sent to the executor's workers ({exc}); build it from "
-                                "module-level functions and classes (no lambdas or closures)") from exc
+                raise TypeError(f"{name} must pickle to be sent to the workers of a {type(executor).__name__} "
+                                f"({exc}); build it from module-level functions and classes (no lambdas or "
+                                "closures), or run with executor=None or a concurrent.futures.ThreadPoolExecutor, "
+                                "which do not pickle") from exc
 
+    # what is known before any chunk runs: in the manifest from the start, so a partial store keeps it
+    run_stats: dict[str, Any] = {
+        "chunks": len(bounds), "chunk_size": chunk_size, "batch": B,
+        "executor": "none" if executor is None else type(executor).__name__,
+        "reduce": reduce if reduce is None or isinstance(reduce, str) else getattr(reduce, "__name__", repr(reduce))}
+    if seed_parts is not None:
+        run_stats["seed"] = seed_parts[0]
     root = None
     if store is not None:
         root = _prepare_store(store, overwrite)
     manifest = {"format": FORMAT, "batch_shape": list(batch_shape), "bounds": bounds, "complete": False,
-                "chunk_size": chunk_size, "t_span": [t0, t1]}
+                "chunk_size": chunk_size, "t_span": [t0, t1], "stats": run_stats}
     if root is not None:
         _write_manifest(root, manifest)
 
     def make_task(i: int) -> _Task:
         a, b = bounds[i]
         chunk = {k: _take(v, cores[k], batch_shape, a, b) for k, v in init.items()}
-        return _Task(i, a, b, system, (t0, t1), t_eval, dict(options), chunk or None, sampler, seed_parts,
+        opts = dict(options)
+        if opts.get("events") is not None:
+            opts["events"] = _chunk_events(opts["events"], batch_shape, a, b)
+        return _Task(i, a, b, system, (t0, t1), t_eval, opts, chunk or None, sampler, seed_parts,
                      SAMPLER_BLOCK, reduce)
 
     bar = _progress_bar(progress, B)
     started = time.perf_counter()
     collected: dict[str, Any] = {"arrays": None, "status": np.full(B, -1, dtype=np.int64), "t": None,
                                  "tails": None, "meta": None, "stats": [], "failed": [], "retries": 0,
-                                 "traj_stats": {}}
+                                 "traj_stats": {}, "events": []}
     try:
         _run_all(executor, make_task, bounds, retries, max_in_flight, collected, root, bar)
     finally:
@@ -194,21 +217,19 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     wall = time.perf_counter() - started
 
     stats = _merge_stats(collected["stats"])
-    stats.update({"chunks": len(bounds), "chunk_size": chunk_size, "failed_chunks": collected["failed"],
-                  "retries": collected["retries"], "wall_time": wall, "batch": B,
-                  "executor": "none" if executor is None else type(executor).__name__,
-                  "reduce": reduce if reduce is None or isinstance(reduce, str) else getattr(reduce, "__name__",
-                                                                                             repr(reduce))})
-    if seed_parts is not None:
-        stats["seed"] = seed_parts[0]
+    stats.update(run_stats)
+    stats.update({"failed_chunks": collected["failed"], "retries": collected["retries"], "wall_time": wall})
     meta = collected["meta"] or {}
     message = (f"{len(collected['failed'])} of {len(bounds)} chunks failed (status -1): "
                f"{collected['failed'][0]['error']}" if collected["failed"] else meta.get("message", ""))
     t_out = collected["t"] if collected["t"] is not None else (t_eval[-1:] if reduce == "final" else t_eval)
     tails = collected["tails"] if collected["tails"] is not None else _fallback_tails(system, init, sampler, options)
+    ev = options.get("events")
+    n_events = 0 if ev is None else (len(ev) if isinstance(ev, (list, tuple)) else 1)
     if root is not None:
         manifest.update({"complete": True, "t": t_out, "tails": {k: list(v) for k, v in tails.items()},
-                         "meta": {"n": meta.get("n"), "algebra_name": meta.get("algebra_name", "")},
+                         "meta": {"n": meta.get("n"), "algebra_name": meta.get("algebra_name", ""),
+                                  "events": n_events},
                          "stats": stats, "message": message,
                          "trajectory_stats": {k: v.dtype.str for k, v in collected["traj_stats"].items()}})
         _write_manifest(root, manifest)
@@ -221,7 +242,8 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
         arrays = {k: np.full((t_out.size,) + batch_shape + v, np.nan) for k, v in tails.items()}
     return Ensemble(t=t_out, batch_shape=batch_shape, bounds=bounds, tails=tails, stats=stats, n=meta.get("n"),
                     algebra_name=meta.get("algebra_name", ""), message=message, arrays=arrays,
-                    status=collected["status"].reshape(batch_shape), traj_stats=collected["traj_stats"])
+                    status=collected["status"].reshape(batch_shape), traj_stats=collected["traj_stats"],
+                    n_events=n_events, event_parts=collected["events"])
 
 
 def _run_all(executor, make_task, bounds, retries, max_in_flight, collected, root, bar) -> None:
@@ -303,6 +325,7 @@ def _collect(i: int, bound, payload: dict, collected: dict, root: Path | None) -
     if root is not None:
         _write_shard(root, i, payload)
         return
+    collected["events"].append({k: v for k, v in payload.items() if k.startswith(_EVENT)})
     if collected["arrays"] is None:
         T = payload["t"].size
         collected["arrays"] = {k: np.full((T, B) + payload[k].shape[2:], np.nan) for k in _ARRAYS if k in payload}
@@ -321,20 +344,6 @@ def _fallback_tails(system, init: dict, sampler, options: dict) -> dict[str, tup
     if m is not None and options.get("reconstruct"):
         tails["g"] = (m, m)
     return tails
-
-
-def _merge_stats(chunk_stats: list[dict]) -> dict:
-    """Counts (nfev, steps, rejected) summed over chunks; the rest (method, form, ...) from the first chunk."""
-    out: dict[str, Any] = {}
-    for st in chunk_stats:
-        for k, v in st.items():
-            if k in ("wall_time", "batch"):
-                continue
-            if k in _SUMMED and isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool):
-                out[k] = out.get(k, 0) + v
-            else:
-                out.setdefault(k, v)
-    return out
 
 
 # ====================================================================== validation helpers
@@ -391,6 +400,25 @@ def _take(a: np.ndarray, core: int, batch_shape: tuple[int, ...], start: int, st
     if not lead:
         return np.broadcast_to(a, (stop - start,) + tail).copy()
     return np.ascontiguousarray(a[sel])
+
+
+def _chunk_events(events, batch_shape: tuple[int, ...], start: int, stop: int):
+    """``events`` for the chunk ``[start, stop)``: a :class:`~liesuslov.integrators.LinearEvent` with
+    per-trajectory coefficients (leading batch axes) gets the chunk's rows of them, so that every
+    trajectory has its own plane as in one integrate call; a callable is passed as it is (a chunk calls it
+    with its own batch, (stop - start,)): it must work per trajectory."""
+    from ..integrators.events import LinearEvent
+
+    def rows(a, core: int):
+        return a if a is None or a.ndim <= core else _take(a, core, batch_shape, start, stop)
+
+    def one(e):
+        if not isinstance(e, LinearEvent):
+            return e
+        return LinearEvent(omega=rows(e.omega, 1), Gamma=rows(e.Gamma, 1), g=rows(e.g, 2), offset=rows(e.offset, 0),
+                           terminal=e.terminal, direction=e.direction)
+
+    return [one(e) for e in events] if isinstance(events, (list, tuple)) else one(events)
 
 
 def _prepare_store(store, overwrite: bool) -> Path:

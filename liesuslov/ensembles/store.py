@@ -13,7 +13,9 @@ import numpy as np
 from .._io import atomic_write
 from .constants import (
     _ARRAYS,
+    _EVENT,
     _STAT,
+    _SUMMED,
     FORMAT,
     MANIFEST,
     _shard_name,
@@ -22,6 +24,25 @@ from .result import Ensemble
 
 
 # ====================================================================== the store
+def _merge_stats(chunk_stats: list[dict]) -> dict:
+    """Counts (nfev, steps, rejected) summed over chunks (0 for none); the rest (method, form, ...) from the first."""
+    out: dict[str, Any] = dict.fromkeys(_SUMMED, 0)
+    for st in chunk_stats:
+        for k, v in st.items():
+            if k in ("wall_time", "batch"):
+                continue
+            if k in _SUMMED and isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool):
+                out[k] = out[k] + v
+            elif k not in _SUMMED:
+                out.setdefault(k, v)
+    return out
+
+
+def _read_meta(path: Path) -> dict:
+    with np.load(path, allow_pickle=False) as z:
+        return json.loads(z["__meta__"].tobytes().decode())
+
+
 def _atomic_write(path: Path, write: Callable[[Any], None]) -> None:
     """``write(f)`` on a binary file object, through the package's atomic writer (readers never see half a file)."""
 
@@ -48,7 +69,8 @@ def _write_manifest(store: Path, manifest: dict) -> None:
 
 
 def _write_shard(store: Path, i: int, payload: dict) -> None:
-    arrays = {k: v for k, v in payload.items() if k in ("t", *_ARRAYS, "status") or k.startswith(_STAT)}
+    arrays = {k: v for k, v in payload.items()
+              if k in ("t", *_ARRAYS, "status") or k.startswith(_STAT) or k.startswith(_EVENT)}
     # UTF-8 bytes, not a numpy unicode string (4 bytes a character)
     meta = np.frombuffer(json.dumps(payload["meta"], default=_jsonable).encode(), dtype=np.uint8)
     _atomic_write(store / _shard_name(i), lambda f: np.savez(f, **arrays, __meta__=meta))
@@ -66,7 +88,13 @@ def open_ensemble(store) -> Ensemble:
     -------
     Ensemble
         ``complete`` is False when chunks are missing (a run interrupted or still going): their
-        trajectories have status -1 and NaN values, and ``message`` says how many are missing.
+        trajectories have status -1 and NaN values, and ``message`` says how many are missing. A
+        finished run's failed chunks (``stats["failed_chunks"]``) have status -1 too but are not missing.
+        ``stats`` has ``nfev``, ``steps`` and ``rejected`` as a Solution's: for a finished store those of the
+        run; for a partial one the sums over the chunks in the store (the trajectories computed so far,
+        whose status is not -1), with the first chunk's ``method``, ``form``, ... and the run's ``chunks``,
+        ``chunk_size``, ``batch``, ``executor``, ``reduce`` and ``seed`` (``failed_chunks`` is then empty,
+        ``retries`` and ``wall_time`` absent: they are known only at the end).
 
     Raises
     ------
@@ -87,28 +115,36 @@ def open_ensemble(store) -> Ensemble:
         raise ValueError(f"store {str(root)!r}: unknown format {man.get('format')!r} (expected {FORMAT!r})")
     bounds = man["bounds"]
     present = [(root / _shard_name(i)).is_file() for i in range(len(bounds))]
+    first = next((i for i, p in enumerate(present) if p), None)
     t, tails, meta = man.get("t"), man.get("tails"), man.get("meta", {})
     if t is None or tails is None:  # the run stopped before its end: read them off a finished shard
-        first = next((i for i, p in enumerate(present) if p), None)
         if first is None:
             raise ValueError(f"store {str(root)!r}: no chunk has finished yet (0 of {len(bounds)}); nothing to read")
         with np.load(root / _shard_name(first), allow_pickle=False) as z:
             t = z["t"]
             tails = {k: z[k].shape[2:] for k in _ARRAYS if k in z.files}
-            meta = json.loads(z["__meta__"].tobytes().decode())
-    missing = len(bounds) - sum(present)
+        meta = _read_meta(root / _shard_name(first))
+    stats = dict(man.get("stats", {}))
+    # a finished run writes no shard for a chunk that failed: those are in failed_chunks, not missing
+    failed = {int(f["chunk"]) for f in stats.get("failed_chunks", [])} if man.get("complete") else set()
+    missing = [i for i, p in enumerate(present) if not p and i not in failed]
     message = man.get("message", "")
     if missing:
-        message = (f"{missing} of {len(bounds)} chunks missing from the store (status -1, values NaN); "
+        message = (f"{len(missing)} of {len(bounds)} chunks missing from the store (status -1, values NaN); "
                    "the run was interrupted or is still going. " + message).strip()
-    stats = dict(man.get("stats", {}))
+    if missing or not man.get("complete"):
+        # the manifest's counts are those of a finished run: here, the sums over the chunks in the store
+        stats = {k: v for k, v in stats.items() if k not in _SUMMED}
+        shard_stats = [_read_meta(root / _shard_name(i)).get("stats", {}) for i, p in enumerate(present) if p]
+        stats = {**_merge_stats(shard_stats), **stats}
+        stats.setdefault("failed_chunks", [])
     traj_stats = man.get("trajectory_stats")
     if traj_stats is None:
-        first = next((i for i, p in enumerate(present) if p), None)
         traj_stats = {}
         if first is not None:
             with np.load(root / _shard_name(first), allow_pickle=False) as z:
                 traj_stats = {k[len(_STAT):]: z[k].dtype.str for k in z.files if k.startswith(_STAT)}
     return Ensemble(t=t, batch_shape=man["batch_shape"], bounds=bounds, tails=tails, stats=stats,
                     n=meta.get("n"), algebra_name=meta.get("algebra_name", ""), message=message,
-                    store=root, present=present, traj_stats=traj_stats)
+                    store=root, present=present, traj_stats=traj_stats, complete=not missing,
+                    n_events=int(meta.get("events", 0) or 0))

@@ -9,6 +9,8 @@ import numpy as np
 
 from .constants import (
     _ARRAYS,
+    _EVENT,
+    _EVENT_FIELDS,
     _STAT,
     _USER_ERRORS,
     SAMPLER_BLOCK,
@@ -68,6 +70,12 @@ def _integrate_chunk(task: _Task) -> dict[str, Any]:
     # status: an int per trajectory (the per-trajectory integrate), or one int for the whole batch
     out["status"] = np.broadcast_to(np.asarray(sol.status, dtype=np.int64).reshape(-1) if np.ndim(sol.status)
                                     else np.asarray(sol.status, dtype=np.int64), (c,)).copy()
+    # event crossings, with the flat index of the whole batch (the chunk's flat index + its start)
+    for j, rec in enumerate(getattr(sol, "events", None) or []):
+        for f in _EVENT_FIELDS:
+            v = getattr(rec, f)
+            if v is not None:
+                out[f"{_EVENT}{j}__{f}"] = np.asarray(v) + task.start if f == "index" else np.asarray(v)
     # per-trajectory statistics (arrays of the batch shape) travel as arrays; the rest in the JSON meta
     stats = {}
     for k, v in sol.stats.items():
@@ -76,7 +84,7 @@ def _integrate_chunk(task: _Task) -> dict[str, Any]:
         else:
             stats[k] = v
     out["meta"] = {"stats": stats, "message": str(getattr(sol, "message", "")), "n": sol.n,
-                   "algebra_name": sol.algebra_name}
+                   "algebra_name": sol.algebra_name, "events": len(getattr(sol, "events", None) or [])}
     return out
 
 
