@@ -189,17 +189,19 @@ class EulerTop:
         return 2.0 * self.energy * self.period / self.momentum
 
     def geometric_phase(self, samples: int = 512) -> np.ndarray:
-        r"""``Lambda``: the solid angle on the left of the closed curve ``M/|M|`` over one period, shape (...).
+        r"""``Lambda``: the solid angle on the left of the closed curve ``M/|M|`` over one period, in
+        ``[0, 4 pi)``, shape (...).
 
         ``int_0^T p.(u x u')/(1 + p.u) dt`` with ``u' = u x w`` and ``p`` = :attr:`axis`, by the
-        trapezoidal rule on ``samples`` points of the period (exponentially convergent). NaN on the
-        separatrix.
+        trapezoidal rule on ``samples`` points of the period (exponentially convergent), modulo ``4 pi``:
+        the integral is the area enclosed about ``p`` with the sign of the sense of travel, which is the
+        area on the left modulo ``4 pi``. NaN on the separatrix.
         """
         u, w, dt = self._period_samples(samples)
         p = self.axis
         du = np.cross(u, w)
         integrand = np.sum(p * np.cross(u, du), axis=-1) / (1.0 + np.sum(p * u, axis=-1))
-        return np.sum(integrand, axis=0) * dt
+        return np.mod(np.sum(integrand, axis=0) * dt, 4.0 * np.pi)
 
     def precession(self, samples: int = 512) -> np.ndarray:
         r"""Landau's precession of the body about ``m`` during one period (an independent route to the phase).

@@ -64,8 +64,36 @@ class Batch:
 
     def reduced(self, omega: np.ndarray, Gamma: np.ndarray | None) -> np.ndarray:
         """The reduced state ``(xi, Gamma)`` (xi = coordinates in D's orthonormal basis), (..., k [+ n])."""
-        xi = omega @ self.system.constraints.basis.T
+        xi = rows_matmul(omega, self.system.constraints.basis.T)
         return xi if Gamma is None else np.concatenate([xi, Gamma], axis=-1)
+
+
+def rows_matmul(x: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """``x @ M`` for ``x`` of shape (..., p), summed in a fixed order: each row's bits do not depend on its batch.
+
+    ``np.matmul`` hands batches to BLAS, whose kernel (and summation order) may depend on the number of rows;
+    a trajectory's result must not depend on its batch mates, so the research tools use this instead.
+    """
+    x = np.asarray(x, dtype=float)
+    M = np.asarray(M, dtype=float)
+    out = np.zeros(x.shape[:-1] + M.shape[1:])
+    for j in range(M.shape[0]):
+        out = out + x[..., j, None] * M[j]
+    return out
+
+
+def per_row(f, *arrays):
+    """``f`` applied to each row ``a[k:k+1]`` of the flat batch arrays (None passed through), stacked again.
+
+    The system's methods work on batches through BLAS; called row by row a trajectory gets the same bits
+    alone or in any batch. ``f`` returns an array or a tuple of arrays (or None) with the row axis first.
+    """
+    B = next(a.shape[0] for a in arrays if a is not None)
+    outs = [f(*(None if a is None else a[k:k + 1] for a in arrays)) for k in range(B)]
+    if isinstance(outs[0], tuple):
+        return tuple(None if outs[0][i] is None else np.concatenate([o[i] for o in outs])
+                     for i in range(len(outs[0])))
+    return np.concatenate([np.asarray(o).reshape((1,) + np.shape(o)[1:]) for o in outs])
 
 
 def prepare(system, Omega0, Gamma0=None, g0=None) -> Batch:
@@ -253,12 +281,14 @@ def _window_events(system, omega, t_span, event, direction, kwargs, B) -> Window
     return Window(cr, sol.omega[-1], G_end, g_end, status)
 
 
-def _rate(system, omega, Gamma) -> float:
-    """A frequency scale of the motion (1/time): the first window of the period search is ~32 / rate long."""
-    xdot, _ = system.rhs(omega, Gamma)
-    w = float(np.max(np.linalg.norm(omega, axis=-1)))
-    acc = float(np.max(np.linalg.norm(xdot, axis=-1)))
-    return max(1.0, w, np.sqrt(acc))
+def rates(omega: np.ndarray, xdot: np.ndarray) -> np.ndarray:
+    """A frequency scale of each trajectory (1/time), ``max(1, |omega|, sqrt|omega'|)``, shape (B,).
+
+    The period search sizes each trajectory's first window from its own rate (~32 / rate long).
+    """
+    w = np.linalg.norm(omega, axis=-1)
+    acc = np.linalg.norm(xdot, axis=-1)
+    return np.maximum(1.0, np.maximum(w, np.sqrt(acc)))
 
 
 def make_record(cr: Crossings, n: int | None, algebra_name: str) -> EventRecord:
@@ -279,3 +309,28 @@ def run_plain(system, omega, Gamma, g, t_span, opts: dict) -> tuple[np.ndarray, 
 
 def positive(value, name: str) -> float:
     return check_positive(value, name)
+
+
+#: The tolerances of the re-integrations that check a research tool's own (possibly loose) integration:
+#: a candidate return of the period search, the error of the monodromy.
+TIGHT = {"method": "rkmk853", "rtol": 1e-12, "atol": 1e-14}
+
+
+def tight_options(opts: dict) -> dict | None:
+    """Options of a checking re-integration (:data:`TIGHT`, or tighter if ``opts`` are), None if ``opts`` are that.
+
+    The user's other options (``chart``, ``form``, ``max_steps``, ...) are kept; ``h`` and ``first_step`` are
+    dropped (the adaptive method chooses its steps).
+    """
+    from ..integrators import METHODS
+
+    meth = METHODS.get(opts["method"]) if isinstance(opts.get("method"), str) else None
+    adaptive = meth is not None and meth.adaptive
+    rtol = min(TIGHT["rtol"], float(opts.get("rtol", 1.0))) if adaptive else TIGHT["rtol"]
+    atol = min(TIGHT["atol"], float(opts.get("atol", 1.0))) if adaptive else TIGHT["atol"]
+    if opts.get("method") == TIGHT["method"] and float(opts.get("rtol", 1e-8)) <= rtol \
+            and float(opts.get("atol", 1e-10)) <= atol and "h" not in opts and "first_step" not in opts:
+        return None
+    out = {k: v for k, v in opts.items() if k not in ("h", "first_step")}
+    out.update(method=TIGHT["method"], rtol=rtol, atol=atol)
+    return out

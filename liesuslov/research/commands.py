@@ -197,7 +197,8 @@ def run_phase(args, load, user_error) -> int:
         print(text, end="")
         return 1
     lines += [f"period T = {float(ph.period):.15g}" + ("" if args.period is not None else
-              f" (first return, relative distance {float(ph.return_distance):.3g}, {int(ph.crossings)} crossing(s))"),
+              f" (first return, relative distance {float(ph.return_distance):.3g}, {float(ph.closure):.3g} on the "
+              f"checking re-integration, {int(ph.crossings)} crossing(s))"),
               "monodromy R = g(0)^-1 g(T):", str(ph.monodromy),
               f"rotation angles of R's invariant planes: {np.array2string(ph.angles, precision=12)}"]
     if system.n == 3:

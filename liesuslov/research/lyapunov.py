@@ -3,9 +3,10 @@ r"""The largest Lyapunov exponent of the reduced flow, by Benettin's renormalisa
 The reduced state is ``s = (xi, Gamma)``: ``xi`` the coordinates of Omega in the orthonormal basis of D
 (so the metric is the pairing restricted to D) and ``Gamma`` on the sphere (omitted when the scene has
 none). A companion trajectory starts at ``s0 + delta e`` with ``e`` a random unit tangent vector (tangent
-to D and to the sphere at ``Gamma0``); every ``tau`` time units the separation ``d_k = |s' - s|`` is
-measured and the companion is put back at distance ``delta`` along the separation (``Gamma'``
-renormalised onto the sphere). Then
+to D and to the sphere at ``Gamma0``; drawn per trajectory from the seed and the trajectory's own ``s0``,
+so a trajectory's estimate does not depend on its batch mates); every ``tau`` time units the separation
+``d_k = |s' - s|`` is measured and the companion is put back at distance ``delta`` along the separation
+(``Gamma'`` renormalised onto the sphere). Then
 
 .. math::
 
@@ -58,14 +59,43 @@ class LyapunovResult:
     status: np.ndarray
 
 
-def _tangent(rng: np.random.Generator, k: int, Gamma: np.ndarray | None, B: int) -> np.ndarray:
-    """Random unit tangent vectors ``(B, k [+ n])``: any direction in D, tangent to the sphere at Gamma."""
-    e = rng.standard_normal((B, k))
-    if Gamma is not None:
-        eg = rng.standard_normal(Gamma.shape)
-        eg = eg - np.sum(eg * Gamma, axis=-1, keepdims=True) * Gamma
-        e = np.concatenate([e, eg], axis=-1)
-    return e / np.linalg.norm(e, axis=-1, keepdims=True)
+def _seed_key(seed) -> tuple[int, tuple[int, ...]]:
+    """The user's ``seed`` as ``(entropy, spawn_key)`` of a :class:`numpy.random.SeedSequence`.
+
+    None draws fresh entropy; a Generator gives one draw of its stream (one per call, whatever the batch).
+    """
+    if seed is None:
+        ss = np.random.SeedSequence()
+        return int(ss.entropy), ()
+    if isinstance(seed, np.random.Generator):
+        return int(seed.integers(0, 2 ** 63, dtype=np.int64)), ()
+    if isinstance(seed, np.random.SeedSequence):
+        return int(seed.entropy), tuple(int(v) for v in seed.spawn_key)
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"seed must be None, a non-negative integer or a numpy Generator, got "
+                        f"{type(seed).__name__} {seed!r}")
+    if seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed}")
+    return int(seed), ()
+
+
+def _tangent(seed_key: tuple[int, tuple[int, ...]], s0: np.ndarray, k: int, Gamma: np.ndarray | None) -> np.ndarray:
+    """Random unit tangent vectors ``(B, k [+ n])``: any direction in D, tangent to the sphere at Gamma.
+
+    Each trajectory draws from its own stream, the seed's entropy with the bits of its own initial reduced
+    state ``s0`` as spawn key: the same initial data and seed give the same vector alone or in any batch.
+    """
+    entropy, key = seed_key
+    e = np.empty_like(s0)
+    for b, row in enumerate(s0):
+        words = np.ascontiguousarray(row + 0.0, dtype=np.float64).view(np.uint32)   # + 0.0: -0.0 -> 0.0
+        rng = np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=key + tuple(int(w) for w in words)))
+        eb = rng.standard_normal(row.size)
+        if Gamma is not None:
+            G = Gamma[b]
+            eb[k:] = eb[k:] - np.sum(eb[k:] * G) * G
+        e[b] = eb / np.linalg.norm(eb)
+    return e
 
 
 def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renormalize_every: float | None = None,
@@ -81,8 +111,10 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
         ``t1 > t0``.
     Gamma0 : array_like, shape (..., n), optional
         Required when the potential needs it; given otherwise, Gamma is part of the state.
-    seed : int or numpy Generator, optional
-        Seed of the random initial tangent vector.
+    seed : int, numpy Generator or SeedSequence, optional
+        Seed of the random initial tangent vectors (a non-negative integer). Each trajectory draws its own
+        vector from the seed and the bits of its own initial state ``(xi0, Gamma0)``, so a trajectory's
+        exponent is the same alone or in any batch; None: fresh entropy (a different vector each call).
     renormalize_every : float, optional
         ``tau``, the time between renormalisations (default about 5, dividing ``t1 - t0`` evenly: with
         ``delta = 1e-7`` the separation stays in the linear regime for exponents up to ~2).
@@ -117,13 +149,14 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
             raise ValueError(f"renormalize_every = {tau:g} is longer than t_span ({span:g})")
         K = max(1, int(round(span / tau)))
     times = t0 + span * np.arange(1, K + 1) / K
-    rng = np.random.default_rng(seed)
+    seed_key = _seed_key(seed)
     B = b.size
     Dbasis = system.constraints.basis
     k = Dbasis.shape[0]
-    xi = b.omega @ Dbasis.T
+    xi0 = R.rows_matmul(b.omega, Dbasis.T)
+    xi = xi0
     G = b.Gamma
-    e = _tangent(rng, k, G, B)
+    e = _tangent(seed_key, xi if G is None else np.concatenate([xi, G], axis=-1), k, G)
     xi_p = xi + delta * e[:, :k]
     G_p = None
     if G is not None:
@@ -134,7 +167,7 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
     status = np.zeros(B, dtype=int)
     t_prev = t0
     for j, t_next in enumerate(times):
-        om = np.concatenate([xi, xi_p]) @ Dbasis
+        om = R.rows_matmul(np.concatenate([xi, xi_p]), Dbasis)
         kw = dict(opts)
         if G is not None:
             kw["Gamma0"] = np.concatenate([G, G_p])
@@ -142,7 +175,7 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
         st = np.broadcast_to(np.asarray(sol.status), (2 * B,))
         bad = (st[:B] < 0) | (st[B:] < 0)
         om_end = sol.omega[-1]
-        xi_all = om_end @ Dbasis.T
+        xi_all = R.rows_matmul(om_end, Dbasis.T)
         xi, xi_q = xi_all[:B], xi_all[B:]
         d = xi_q - xi
         if G is not None:
@@ -162,7 +195,7 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
             G_p = G_p / np.linalg.norm(G_p, axis=-1, keepdims=True)
         # a failed trajectory keeps NaN; restart it from finite numbers so the batch call stays valid
         if np.any(bad):
-            xi = np.where(bad[:, None], b.omega @ Dbasis.T, xi)
+            xi = np.where(bad[:, None], xi0, xi)
             xi_p = np.where(bad[:, None], xi, xi_p)
             if G is not None:
                 G = np.where(bad[:, None], b.Gamma, G)

@@ -14,8 +14,9 @@ angle about ``M0`` into a dynamic and a geometric part (derived in ``docs/recons
     \Delta\theta \equiv \frac{2ET}{|M_0|} - \Lambda \pmod{2\pi},\qquad
     \Lambda = \oint \frac{p\cdot(u\times\dot u)}{1 + p\cdot u}\,dt,\qquad u = \frac{M}{|M|},
 
-``Lambda`` the solid angle on the left of the closed curve ``u(t)`` (outward normal), ``p`` any point it
-winds around (we take the direction of its mean).
+``Lambda`` the solid angle on the left of the closed curve ``u(t)`` (outward normal), in ``[0, 4 pi)`` (the
+integral is that area modulo ``4 pi``), ``p`` any point with ``-p`` off the curve (we take the direction of
+its mean).
 """
 
 from __future__ import annotations
@@ -48,18 +49,23 @@ class ReconstructionPhase:
         Rotation angles of the invariant planes of R (real Schur form), descending, in ``[0, pi]``.
     axis : ndarray, shape (..., 3)
         n = 3: ``M0/|M0|`` if R fixes ``M0``, else ``Gamma0`` if R fixes ``Gamma0``, else R's own axis;
-        NaN for n != 3.
+        NaN for n != 3. "Fixes ``u``" is ``|R u - u| <= 1e-7 + 4 eps``, ``eps`` the error of R estimated by a
+        re-integration at ``rtol=1e-12`` (see :func:`reconstruction_phase`).
     angle : ndarray, shape (...)
         n = 3: ``R = exp(angle hat(axis))``, in ``(-pi, pi]`` (``>= 0`` with R's own axis); NaN for n != 3.
     dynamic_phase, geometric_phase : ndarray, shape (...)
         The free rigid body (n = 3, no constraint, no potential): ``2 E T / |M0|`` and the solid angle
-        ``Lambda`` swept by ``M/|M|``, with ``angle == dynamic_phase - geometric_phase (mod 2 pi)``
-        (Montgomery); NaN for other systems.
+        ``Lambda`` on the left of the closed curve ``M/|M|`` (outward normal), in ``[0, 4 pi)``, with
+        ``angle == dynamic_phase - geometric_phase (mod 2 pi)`` (Montgomery); NaN for other systems.
     status : ndarray of int, shape (...)
         0 returned (or period given), 1 no return within ``t_max``, -1 the integration failed.
     return_distance : ndarray, shape (...)
-        ``|s(T) - s0| / |s0|`` of the reduced state at the accepted return (the closest return seen
-        when none was accepted; NaN for a given period).
+        ``|s(T) - s0| / |s0|`` of the reduced state at the accepted return, in the integration with the
+        given options (the closest return seen when none was accepted; NaN for a given period).
+    closure : ndarray, shape (...)
+        The same distance at the same return located on the checking re-integration (``rtol=1e-12``): the
+        number compared with ``return_tol`` (the smallest over the checked candidates when none was
+        accepted; NaN for a given period or when no crossing came within the screening tolerance).
     crossings : ndarray of int, shape (...)
         Section crossings examined (0 for a given period).
     axis_kind : ndarray of str, shape (...)
@@ -75,6 +81,7 @@ class ReconstructionPhase:
     geometric_phase: np.ndarray
     status: np.ndarray
     return_distance: np.ndarray
+    closure: np.ndarray
     crossings: np.ndarray
     axis_kind: np.ndarray
     message: str = ""
@@ -176,8 +183,11 @@ def axis_angle(Rm, axis=None) -> tuple[np.ndarray, np.ndarray]:
 def solid_angle(u, dt: float | np.ndarray, p=None) -> np.ndarray:
     r"""The solid angle on the left of a closed curve on the unit sphere sampled uniformly over one period.
 
-    ``Lambda = int p.(u x u')/(1 + p.u) dt`` by the trapezoidal rule (exponentially convergent for a
-    smooth periodic curve); ``u'`` by the spectral derivative of the samples.
+    ``int p.(u x u')/(1 + p.u) dt`` by the trapezoidal rule (exponentially convergent for a smooth periodic
+    curve), ``u'`` by the spectral derivative of the samples, reduced modulo ``4 pi``. For a simple closed
+    curve avoiding ``-p`` the integral is ``+A`` (counter-clockwise about ``p`` seen from outside) or ``-A``
+    (clockwise), ``A`` the area of the region not containing ``-p``; in both cases it is the area on the
+    left modulo ``4 pi``, so the result is that area, in ``[0, 4 pi)``.
 
     Parameters
     ----------
@@ -185,7 +195,12 @@ def solid_angle(u, dt: float | np.ndarray, p=None) -> np.ndarray:
         ``u(t_j)``, ``t_j = j dt``, ``j = 0..N-1`` (the point ``t = T`` left out).
     dt : float or array_like, shape (...)
     p : array_like, shape (..., 3), optional
-        A point the curve winds around (default: the direction of the mean of ``u``).
+        A point such that ``-p`` is off the curve (default: the direction of the mean of ``u``).
+
+    Returns
+    -------
+    ndarray, shape (...)
+        In ``[0, 4 pi)``.
     """
     u = np.asarray(u, dtype=float)
     N = u.shape[0]
@@ -201,10 +216,17 @@ def solid_angle(u, dt: float | np.ndarray, p=None) -> np.ndarray:
     T = np.asarray(dt) * N
     du = du * (2.0 * np.pi / T)[..., None] if np.ndim(T) else du * (2.0 * np.pi / T)
     integrand = np.sum(p * np.cross(u, du), axis=-1) / (1.0 + np.sum(p * u, axis=-1))
-    return np.sum(integrand, axis=0) * dt
+    return np.mod(np.sum(integrand, axis=0) * dt, 4.0 * np.pi)
 
 
 # ------------------------------------------------------------------------------------- the tool
+#: Default closure of an accepted return, ``|s(T) - s0| <= RETURN_TOL |s0|`` on the checking re-integration.
+RETURN_TOL = 1e-7
+#: ``R`` fixes a unit vector ``u`` when ``|R u - u| <= FIX_FLOOR + FIX_FACTOR * eps`` (``eps``: R's error).
+FIX_FLOOR = 1e-7
+FIX_FACTOR = 4.0
+
+
 def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t_max: float = 1000.0,
                          return_tol: float | None = None, on_failure: str = "raise", samples: int = 256,
                          **options: Any) -> ReconstructionPhase:
@@ -221,21 +243,26 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
         Accepted for symmetry with ``integrate``; R does not depend on it (the attitude is integrated
         from the identity).
     period : float or array_like, shape (...), optional
-        Use this period as is. None: the first return of the reduced state ``s = (omega, Gamma)`` to
-        the plane through ``s0`` normal to the reduced velocity (crossed upwards), located on the
-        continuous extension; a crossing counts as a return only if ``|s - s0| <= return_tol |s0|``,
-        otherwise the search goes on to the next crossing.
+        Use this period as is. None: the first return of the reduced state ``s = (xi, Gamma)`` to the
+        plane through ``s0`` normal to the reduced velocity (crossed upwards), located on the continuous
+        extension of the integration with ``options``. A crossing with ``|s - s0| <= screen |s0|``
+        (``screen = max(return_tol, min(1e-2, 1e4 rtol))``, ``1e-2`` for a fixed-step method) is a
+        candidate; it is the return only if the same crossing, located on a re-integration of the
+        trajectory with ``method="rkmk853", rtol=1e-12, atol=1e-14``, closes to ``return_tol``:
+        ``|s(T') - s0| <= return_tol |s0|``. Otherwise the search goes on to the next crossing.
     t_max : float
         Give up the search at this time.
     return_tol : float, optional
-        Default ``max(1e-6, 1e4 rtol)``.
+        The closure of an accepted return on the re-integration, relative to ``|s0|`` (default 1e-7). A
+        quasi-periodic motion comes back no closer than ~1/(number of turns) of its torus within ``t_max``.
     on_failure : {"raise", "nan"}
         A trajectory without a return within ``t_max`` (or a failed integration): ValueError naming
         ``t_max`` (default), or NaN results with ``status`` 1 (-1).
     samples : int
         Points per period for the geometric phase of the free body.
     **options
-        ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``.
+        ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``. The reported
+        period, monodromy and angles come from this integration (the re-integration only checks it).
 
     Returns
     -------
@@ -245,6 +272,15 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
     ------
     ValueError
         No return within ``t_max`` (``on_failure="raise"``), or bad input.
+
+    Notes
+    -----
+    Every trajectory is searched on its own (its own windows, its own checks): its numbers are the same
+    alone or in any batch.
+
+    n = 3: ``R`` is said to fix the unit vector ``u`` when ``|R u - u| <= 1e-7 + 4 eps``, ``eps = |R - R'|_2``
+    the difference between ``R`` and the same monodromy from the re-integration (the error of ``R`` as
+    integrated with ``options``; ``R'`` at the re-integration's own return for a found period).
     """
     if on_failure not in ("raise", "nan"):
         raise ValueError(f"on_failure must be 'raise' or 'nan', got {on_failure!r}")
@@ -256,36 +292,39 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
     m = system.n
     if m is None:
         raise ValueError(f"reconstruction_phase needs a matrix representation of {system.algebra.name}")
-    if return_tol is None:
-        return_tol = max(1e-6, 1e4 * float(opts.get("rtol", 1e-10)))
-    return_tol = R.positive(return_tol, "return_tol")
+    return_tol = RETURN_TOL if return_tol is None else R.positive(return_tol, "return_tol")
+    tight = R.tight_options(opts)
+    screen = max(return_tol, _screen(opts))
     B = b.size
     s0 = b.reduced(b.omega, b.Gamma)
     scale = np.maximum(np.linalg.norm(s0, axis=-1), np.finfo(float).tiny)
     T = np.full(B, np.nan)
     Rm = np.full((B, m, m), np.nan)
+    Rt = np.full((B, m, m), np.nan)     # the monodromy of the checking re-integration
     status = np.zeros(B, dtype=int)
     dist = np.full(B, np.nan)
+    closure = np.full(B, np.nan)
     count = np.zeros(B, dtype=int)
-    ident = np.broadcast_to(np.eye(m), (B, m, m)).copy()
+    want_axes = m == 3 and system.is_so
     if period is None:
-        _search(system, b, s0, scale, return_tol, t_max, opts, T, Rm, status, dist, count)
-        message = _message(status, dist, t_max, return_tol)
-        if on_failure == "raise" and np.any(status != 0):
-            raise ValueError(message)
+        _search(system, b, s0, scale, return_tol, screen, t_max, opts, tight, T, Rm, Rt, status, dist, closure,
+                count)
     else:
         P = _period(period, b.shape)
-        status[:] = 0
+        ident = np.broadcast_to(np.eye(m), (B, m, m)).copy()
         for val in np.unique(P):
             rows = np.nonzero(P == val)[0]
-            g_end, st = R.run_plain(system, b.omega[rows], None if b.Gamma is None else b.Gamma[rows], ident[rows],
-                                    (0.0, float(val)), opts)
+            G = None if b.Gamma is None else b.Gamma[rows]
+            g_end, st = R.run_plain(system, b.omega[rows], G, ident[rows], (0.0, float(val)), opts)
             T[rows] = val
             Rm[rows] = g_end
             status[rows] = np.where(st < 0, -1, 0)
-        message = _message(status, dist, t_max, return_tol)
-        if on_failure == "raise" and np.any(status != 0):
-            raise ValueError(message)
+            if want_axes:
+                Rt[rows] = g_end if tight is None else R.run_plain(system, b.omega[rows], G, ident[rows],
+                                                                   (0.0, float(val)), tight)[0]
+    message = _message(status, dist, closure, t_max, return_tol, tight)
+    if on_failure == "raise" and np.any(status != 0):
+        raise ValueError(message)
     # ---- derived quantities
     ok = status == 0
     angles = rotation_angles(Rm)
@@ -294,8 +333,8 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
     kind = np.full(B, "", dtype=object)
     dyn = np.full(B, np.nan)
     geo = np.full(B, np.nan)
-    if m == 3 and system.is_so:
-        _axes(system, b, Rm, ok, axis, angle, kind)
+    if want_axes:
+        _axes(system, b, Rm, Rt, ok, axis, angle, kind)
         if _is_free_body(system):
             _montgomery(system, b, T, ok, opts, samples, dyn, geo)
     shp = b.shape
@@ -303,8 +342,20 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
         period=T.reshape(shp), monodromy=Rm.reshape(shp + (m, m)), angles=angles.reshape(shp + (m // 2,)),
         axis=axis.reshape(shp + (3,)), angle=angle.reshape(shp), dynamic_phase=dyn.reshape(shp),
         geometric_phase=geo.reshape(shp), status=status.reshape(shp), return_distance=dist.reshape(shp),
-        crossings=count.reshape(shp), axis_kind=kind.astype(str).reshape(shp), message=message,
-        stats={"return_tol": return_tol, "t_max": t_max, **opts})
+        closure=closure.reshape(shp), crossings=count.reshape(shp), axis_kind=kind.astype(str).reshape(shp),
+        message=message,
+        stats={"return_tol": return_tol, "screen_tol": screen, "t_max": t_max,
+               "check": dict(opts) if tight is None else tight, **opts})
+
+
+def _screen(opts: dict) -> float:
+    """The candidate tolerance of the search's own integration: ``min(1e-2, 1e4 rtol)``, 1e-2 for fixed step."""
+    from ..integrators import METHODS
+
+    meth = METHODS.get(opts["method"]) if isinstance(opts.get("method"), str) else None
+    if meth is None or not meth.adaptive:
+        return 1e-2
+    return min(1e-2, 1e4 * float(opts.get("rtol", 1e-8)))
 
 
 def _period(period, shape) -> np.ndarray:
@@ -320,15 +371,22 @@ def _period(period, shape) -> np.ndarray:
     return P.reshape(-1)
 
 
-def _message(status, dist, t_max, tol) -> str:
+def _message(status, dist, closure, t_max, tol, tight) -> str:
     if np.all(status == 0):
         return "every trajectory returned"
     parts = []
     nr = int(np.sum(status == 1))
     if nr:
         d = dist[status == 1]
-        closest = f"; the closest return was at a relative distance {np.nanmin(d):.3g}" if np.any(np.isfinite(d)) \
-            else "; the section through the initial state was never crossed again"
+        c = closure[status == 1]
+        if np.any(np.isfinite(d)):
+            closest = f"; the closest return was at a relative distance {np.nanmin(d):.3g}"
+            if np.any(np.isfinite(c)):
+                how = "the integration itself" if tight is None else \
+                    f"re-integration at rtol {tight['rtol']:g}"
+                closest += f" (the closest candidate checked by {how} closes to {np.nanmin(c):.3g})"
+        else:
+            closest = "; the section through the initial state was never crossed again"
         parts.append(f"{nr} trajectory(ies) did not return to the initial reduced state within t_max = {t_max:g} "
                      f"(return_tol = {tol:.3g}){closest}: the motion is not periodic (asymptotic or "
                      "quasi-periodic), or raise t_max")
@@ -338,11 +396,59 @@ def _message(status, dist, t_max, tol) -> str:
     return "; ".join(parts)
 
 
-def _search(system, b, s0, scale, tol, t_max, opts, T, Rm, status, dist, count) -> None:
-    """Windows of growing length until every trajectory has returned, failed or reached t_max."""
+class _Check:
+    """The checking re-integration of one trajectory, advanced on demand from its last end (tight options).
+
+    ``crossings`` holds ``(t, relative distance to s0, g)`` of every upward crossing of the trajectory's
+    return plane seen so far (after ``t_min``).
+    """
+
+    def __init__(self, omega, Gamma, m: int):
+        self.t = 0.0
+        self.omega, self.Gamma = omega.copy(), None if Gamma is None else Gamma.copy()
+        self.g = np.eye(m)[None]
+        self.crossings: list[tuple[float, float, np.ndarray]] = []
+        self.failed = False
+
+    def advance(self, system, b, plane, s0, scale, t_min, t_end, tight) -> None:
+        if self.failed or t_end <= self.t:
+            return
+        win = R.run_window(system, self.omega, self.Gamma, self.g, (self.t, t_end), plane, 1, tight, True)
+        cr = win.crossings
+        for j in range(cr.t.size):
+            if cr.t[j] <= t_min:
+                continue
+            s = b.reduced(cr.omega[j:j + 1], None if cr.Gamma is None else cr.Gamma[j:j + 1])[0]
+            self.crossings.append((float(cr.t[j]), float(np.linalg.norm(s - s0) / scale), cr.g[j]))
+        if win.status[0] < 0:
+            self.failed = True
+            return
+        self.t, self.omega, self.g = t_end, win.omega, win.g
+        self.Gamma = win.Gamma
+
+    def near(self, t: float, width: float):
+        """The crossing nearest ``t`` within ``width``, or None."""
+        best = None
+        for c in self.crossings:
+            if abs(c[0] - t) <= width and (best is None or abs(c[0] - t) < abs(best[0] - t)):
+                best = c
+        return best
+
+
+#: A candidate return at ``T`` is looked for on the re-integration within ``CHECK_WINDOW * T`` of ``T``.
+CHECK_WINDOW = 1e-2
+
+
+def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, status, dist, closure,
+            count) -> None:
+    """Per trajectory, windows of doubling length until it has returned, failed or reached t_max.
+
+    Everything is per trajectory (the plane, the first window's length, the checks); trajectories whose
+    windows coincide share an ``integrate`` call, which keeps each trajectory's numbers its own.
+    """
     B = b.size
     m = system.n
-    xdot, Gdot = system.rhs(b.omega, b.Gamma)
+    xdot, Gdot = R.per_row(system.rhs, b.omega, b.Gamma)
     off = np.sum(xdot * b.omega, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot * b.Gamma, axis=-1))
     plane = R.make_plane(omega=xdot, Gamma=Gdot, offset=off, direction=1)
     speed = np.sqrt(np.sum(xdot ** 2, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot ** 2, axis=-1)))
@@ -354,41 +460,64 @@ def _search(system, b, s0, scale, tol, t_max, opts, T, Rm, status, dist, count) 
     # than a rounding-level time (a root located at t0 itself)
     t_min = 1e-9 * (1.0 + scale / np.maximum(speed, np.finfo(float).tiny))
     status[:] = 1
-    active = np.arange(B)
     omega, Gamma = b.omega.copy(), None if b.Gamma is None else b.Gamma.copy()
     g = np.broadcast_to(np.eye(m), (B, m, m)).copy()
-    t_a = 0.0
-    rate = R._rate(system, b.omega, b.Gamma)
-    width = min(t_max, 32.0 / rate)
-    while active.size and t_a < t_max:
-        t_b = min(t_max, t_a + width)
-        ev = R.slice_event(plane, active, B)
-        win = R.run_window(system, omega[active], None if Gamma is None else Gamma[active], g[active],
-                           (t_a, t_b), ev, 1, opts, True)
-        cr = win.crossings
-        done = np.zeros(active.size, dtype=bool)
-        for j in range(cr.t.size):
-            loc = int(cr.index[j])
-            k = int(active[loc])
-            if done[loc] or cr.t[j] <= t_min[k]:
-                continue
-            count[k] += 1
-            s = b.reduced(cr.omega[j], None if cr.Gamma is None else cr.Gamma[j])
-            d = float(np.linalg.norm(s - s0[k]) / scale[k])
-            dist[k] = d if not np.isfinite(dist[k]) else min(dist[k], d)
-            if d <= tol:
-                T[k], Rm[k], dist[k], status[k] = cr.t[j], cr.g[j], d, 0
-                done[loc] = True
-        failed = win.status < 0
-        status[active[failed & ~done]] = -1
-        keep = ~done & ~failed
-        omega[active] = win.omega
-        if Gamma is not None:
-            Gamma[active] = win.Gamma
-        g[active] = win.g
-        active = active[keep]
-        t_a = t_b
-        width *= 2.0
+    # each trajectory's first window: ~32 / rate, rounded down to a power of two (so that trajectories of
+    # similar rates share windows); then doubling
+    width = np.minimum(2.0 ** np.floor(np.log2(32.0 / R.rates(b.omega, xdot))), t_max)
+    t_a = np.zeros(B)
+    checks: dict[int, _Check] = {}
+    active = np.ones(B, dtype=bool)
+    while np.any(active):
+        t_b = np.minimum(t_max, t_a + width)
+        keys = sorted({(t_a[k], t_b[k]) for k in np.nonzero(active)[0]})
+        for ta, tb in keys:
+            rows = np.nonzero(active & (t_a == ta) & (t_b == tb))[0]
+            win = R.run_window(system, omega[rows], None if Gamma is None else Gamma[rows], g[rows], (ta, tb),
+                               R.slice_event(plane, rows, B), 1, opts, True)
+            cr = win.crossings
+            done = np.zeros(rows.size, dtype=bool)
+            for j in range(cr.t.size):
+                loc = int(cr.index[j])
+                k = int(rows[loc])
+                if done[loc] or cr.t[j] <= t_min[k]:
+                    continue
+                count[k] += 1
+                s = b.reduced(cr.omega[j:j + 1], None if cr.Gamma is None else cr.Gamma[j:j + 1])[0]
+                d = float(np.linalg.norm(s - s0[k]) / scale[k])
+                dist[k] = d if not np.isfinite(dist[k]) else min(dist[k], d)
+                if d > screen:
+                    continue
+                # a candidate: the same return on the checking re-integration
+                if tight is None:
+                    found = (float(cr.t[j]), d, cr.g[j])
+                else:
+                    chk = checks.get(k)
+                    if chk is None:
+                        chk = checks[k] = _Check(b.omega[k:k + 1], None if b.Gamma is None else b.Gamma[k:k + 1], m)
+                    chk.advance(system, b, R.slice_event(plane, np.array([k]), B), s0[k], scale[k], t_min[k],
+                                float(cr.t[j]) * (1.0 + CHECK_WINDOW), tight)
+                    found = chk.near(float(cr.t[j]), CHECK_WINDOW * float(cr.t[j]))
+                    if found is None and chk.failed:
+                        status[k] = -1
+                        done[loc] = True
+                        continue
+                if found is None:
+                    continue
+                closure[k] = found[1] if not np.isfinite(closure[k]) else min(closure[k], found[1])
+                if found[1] <= tol:
+                    T[k], Rm[k], Rt[k], dist[k], closure[k], status[k] = cr.t[j], cr.g[j], found[2], d, found[1], 0
+                    done[loc] = True
+            failed = (win.status < 0) & ~done
+            status[rows[failed]] = -1
+            omega[rows] = win.omega
+            if Gamma is not None:
+                Gamma[rows] = win.Gamma
+            g[rows] = win.g
+            active[rows[done | failed]] = False
+        t_a = np.where(active, t_b, t_a)
+        width = np.where(active, 2.0 * width, width)
+        active &= t_a < t_max
 
 
 def _is_free_body(system) -> bool:
@@ -401,13 +530,19 @@ def _vec3(x: np.ndarray) -> np.ndarray:
     return np.stack([-x[..., 2], x[..., 1], -x[..., 0]], axis=-1)
 
 
-def _axes(system, b, Rm, ok, axis, angle, kind) -> None:
-    """n = 3: the axis (M0, else Gamma0, else R's own) and the signed angle about it."""
-    M0 = _vec3(system.inertia(b.omega))
+def _axes(system, b, Rm, Rt, ok, axis, angle, kind) -> None:
+    """n = 3: the axis (M0, else Gamma0, else R's own) and the signed angle about it.
+
+    ``R`` fixes the unit vector ``u`` when ``|R u - u| <= FIX_FLOOR + FIX_FACTOR eps``, ``eps = |R - Rt|_2`` the
+    error of ``R`` estimated by the checking re-integration ``Rt``: an exactly fixed vector is moved by at
+    most ``eps`` (plus ``Rt``'s own, much smaller, error).
+    """
+    M0 = _vec3(R.per_row(system.inertia, b.omega))
     nM = np.linalg.norm(M0, axis=-1)
-    fix_tol = 1e-6
     for k in np.nonzero(ok)[0]:
         Rk = Rm[k]
+        eps = float(np.linalg.norm(Rk - Rt[k], 2)) if np.all(np.isfinite(Rt[k])) else 0.0
+        fix_tol = FIX_FLOOR + FIX_FACTOR * eps
         cands = []
         if nM[k] > 0:
             cands.append(("momentum", M0[k] / nM[k]))
@@ -424,9 +559,9 @@ def _axes(system, b, Rm, ok, axis, angle, kind) -> None:
 
 
 def _montgomery(system, b, T, ok, opts, samples, dyn, geo) -> None:
-    """Free body: ``2 E T / |M0|`` and the solid angle swept by ``M/|M|`` over one period."""
-    E = system.energy(b.omega)
-    M0 = _vec3(system.inertia(b.omega))
+    """Free body: ``2 E T / |M0|`` and the solid angle on the left of ``M/|M|`` over one period."""
+    E = R.per_row(system.energy, b.omega)
+    M0 = _vec3(R.per_row(system.inertia, b.omega))
     dyn[ok] = (2.0 * E * T / np.linalg.norm(M0, axis=-1))[ok]
     from ..integrators import integrate
 

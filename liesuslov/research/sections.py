@@ -59,7 +59,10 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
     Gamma0 : array_like, shape (..., n), optional
         Required when the potential needs it; given otherwise, Gamma is integrated too.
     g0 : array_like, shape (..., m, m), optional
-        Initial attitude: the attitude is reconstructed (and reported at the crossings) iff given.
+        Initial attitude. The attitude is reconstructed (and reported at the crossings) iff ``g0`` is given
+        or ``section`` is a linear event with ``g`` coefficients (then from the identity). A callable
+        section is called with ``g=None`` without ``g0``: one that reads g raises a ValueError telling to
+        pass ``g0`` (e.g. ``np.eye(n)``).
     direction : {1, -1, 0}
         Crossings from ``section < 0`` to ``> 0`` (1), the reverse (-1), or both (0).
     **options
@@ -84,11 +87,51 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
     t0, t1 = R.check_span(t_span)
     opts = R.options_with_defaults(options)
     b = R.prepare(system, Omega0, Gamma0, g0)
-    needs_g = getattr(section, "g", None) is not None and R._is_linear(section)
+    linear = R._is_linear(section)
+    if linear:
+        _check_plane(section, system, b.Gamma is not None)
+    needs_g = linear and section.g is not None
     reconstruct = b.g0 is not None or needs_g
     g = b.g0 if b.g0 is not None else (np.broadcast_to(np.eye(system.n), (b.size, system.n, system.n)).copy()
                                        if reconstruct else None)
-    if R._is_linear(section):
+    if linear:
         section = R.flat_event(section, b.shape)
+    elif not reconstruct:
+        section = _without_attitude(section, system.n)
     win = R.run_window(system, b.omega, b.Gamma, g, (t0, t1), section, int(direction), opts, reconstruct)
     return R.make_record(win.crossings, system.n, system.algebra.name)
+
+
+def _check_plane(section, system, has_gamma: bool) -> None:
+    """A linear section's coefficients have the state's shapes: omega (..., d), Gamma (..., n), g (..., m, m)."""
+    d, n = system.algebra.dim, system.n
+    for name, tail, what in (("omega", (d,), f"one per coordinate of Omega, d = {d}"),
+                             ("Gamma", (n,), f"one per component of Gamma, n = {n}"),
+                             ("g", (n, n), f"one per entry of the attitude, m = {n}")):
+        val = getattr(section, name, None)
+        if val is None:
+            continue
+        if name != "omega" and n is None:
+            raise ValueError(f"section reads {name}, which {system.algebra.name} does not have (no matrix "
+                             "representation): use omega= coefficients only")
+        shape = np.shape(val)
+        if shape[len(shape) - len(tail):] != tail or len(shape) < len(tail):
+            raise ValueError(f"section: its {name} coefficients have shape {shape}, expected (..., "
+                             f"{', '.join(map(str, tail))}) ({what}; leading axes are batch axes)")
+    if getattr(section, "Gamma", None) is not None and not has_gamma:
+        raise ValueError("section reads Gamma, but no Gamma0 was given (this scene does not need it): pass "
+                         f"Gamma0, a unit vector of shape (..., {n})")
+
+
+def _without_attitude(section, n):
+    """A callable section called with ``g=None`` (no attitude): a failure that may come from reading g names g0."""
+    def ev(t, Omega, Gamma, g, _f=section):
+        try:
+            return _f(t, Omega, Gamma, g)
+        except (TypeError, AttributeError, IndexError) as exc:
+            fix = (f"If the section reads g, pass g0 (e.g. g0=np.eye({n}))" if n is not None
+                   else "This algebra has no matrix representation: there is no attitude to read")
+            raise ValueError(f"section(t, Omega, Gamma, g) raised {type(exc).__name__}: {exc}. It was called with "
+                             f"g=None: the attitude is reconstructed only when g0 is given. {fix}") from exc
+
+    return ev
