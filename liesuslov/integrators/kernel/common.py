@@ -83,9 +83,17 @@ def _jit_entry(fn):
 
 @overload(control.select, inline="always")
 def _select_scalar(cond, a, b):
-    """:func:`control.select` on scalars, as the compiled formulas below call it."""
+    """:func:`control.select` on scalars, as the compiled formulas below call it.
+
+    Two returns, not ``a if cond else b``: inlined twice into one function, the conditional expression's
+    merged variable gets the same name twice (numba's NumbaIRAssumptionWarning "not in scope")."""
     if isinstance(cond, types.Boolean):
-        return lambda cond, a, b: a if cond else b
+        def impl(cond, a, b):
+            if cond:
+                return a
+            return b
+
+        return impl
     return None
 
 
