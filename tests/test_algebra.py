@@ -345,6 +345,15 @@ def _random_spd(d, rng):
     return A @ A.T + 0.5 * np.eye(d)
 
 
+def _around_the_tolerance(inside: np.ndarray, normal: np.ndarray, tol: float):
+    """Points of D (rows of ``inside``, the last one 0) moved off D by 0.5 and 2 times ``tol |x|`` (by 0.5 and
+    2 times tol from 0), and whether the relative test ``|x - P x| <= tol |x|`` holds: yes, yes, no (but 0)."""
+    scale = np.linalg.norm(inside, axis=1)[:, None]
+    scale[scale == 0.0] = 1.0
+    pts = np.concatenate([inside, inside + 0.5 * tol * scale * normal, inside + 2.0 * tol * scale * normal])
+    return pts, np.array([True] * 7 + [False] * 5)
+
+
 @pytest.mark.parametrize("n", [3, 5, 17])  # so(17): d = 136, beyond the residual projector (the basis path)
 def test_contains_one_vector_agrees_with_the_batch_at_the_tolerance(n):
     """One vector (the residual projector I - B^T B, or the basis when d is large) and a batch (the basis)
@@ -355,12 +364,13 @@ def test_contains_one_vector_agrees_with_the_batch_at_the_tolerance(n):
     inside = S.project(rng.standard_normal((4, alg.dim))) * np.array([[1.0], [1e-3], [1e3], [0.0]])
     normal = S.complement().basis[0]
     tol = 1e-6
-    scale = np.maximum(1.0, np.linalg.norm(inside, axis=1))[:, None]
-    pts = np.concatenate([inside, inside + 0.5 * tol * scale * normal, inside + 2.0 * tol * scale * normal])
-    want = np.array([True] * 8 + [False] * 4)
+    pts, want = _around_the_tolerance(inside, normal, tol)
     np.testing.assert_array_equal(S.contains(pts, tol), want)
     one = np.array([S.contains(p, tol) for p in pts])
     np.testing.assert_array_equal(one, want)
+    # the absolute floor (for brackets that vanish to rounding): a step off 0 within atol is inside
+    np.testing.assert_array_equal(S.contains(pts[[7, 11]], tol, atol=tol), [True, False])
+    assert S.contains(pts[7], tol, atol=tol) and not S.contains(pts[11], tol, atol=tol)
     assert all(isinstance(S.contains(p, tol), np.bool_) for p in pts[:2])
 
 
@@ -384,11 +394,10 @@ def test_contains_one_vector_of_a_coordinate_subspace_agrees_with_the_batch(n):
     normal = np.zeros(d)
     normal[off[0]] = 1.0
     tol = 1e-6
-    scale = np.maximum(1.0, np.linalg.norm(inside, axis=1))[:, None]
-    pts = np.concatenate([inside, inside + 0.5 * tol * scale * normal, inside + 2.0 * tol * scale * normal])
-    want = np.array([True] * 8 + [False] * 4)
+    pts, want = _around_the_tolerance(inside, normal, tol)
     np.testing.assert_array_equal(S.contains(pts, tol), want)
     np.testing.assert_array_equal(np.array([S.contains(p, tol) for p in pts]), want)
+    assert S.contains(pts[7], tol, atol=tol) and not S.contains(pts[11], tol, atol=tol)
     assert not S.contains(np.full(d, np.nan)) and isinstance(S.contains(pts[0], tol), np.bool_)
 
 
@@ -754,3 +763,45 @@ def test_projector_rejects_non_spd_metric():
         D.projector(np.eye(3) + np.triu(np.ones((3, 3)), 1))
     with pytest.raises(ValueError, match="metric"):
         D.projector(-np.eye(3))
+
+
+def test_structure_tests_do_not_change_with_the_scale():
+    """is_subalgebra, is_symmetric_pair and Inertia.is_invariant are relative to the algebra's and the
+    inertia's own scale: rescaled constants (an isomorphic algebra) or a small body give the same answers
+    (with an absolute floor of 1 they said True for anything below ~1e-9)."""
+    C3 = np.asarray(ls.so(3).structure_constants)
+    C4 = np.asarray(ls.so(4).structure_constants)
+    K6 = np.diag([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
+    for s in (1.0, 1e-10, 1e8):
+        a3 = ls.LieAlgebra(s * C3)
+        assert a3.bracket_scale == s
+        assert not Subspace(a3, np.eye(3)[:2]).is_subalgebra() and Subspace(a3, np.eye(3)[:1]).is_subalgebra()
+        a4 = ls.LieAlgebra(s * C4)
+        so3_in_so4 = Subspace(a4, np.eye(6)[[0, 1, 3]])  # E01, E02, E12: a subalgebra, not a symmetric p
+        assert so3_in_so4.is_subalgebra() and not so3_in_so4.is_symmetric()
+        fk = Subspace(a4, np.eye(6)[[2, 4, 5]])  # E03, E13, E23: Fedorov–Kozlov, p of (so(4), so(3))
+        assert fk.is_symmetric() and ls.is_symmetric_pair(fk.complement(), fk)
+        J = ls.Inertia(a4, s * (K6 + 0.1 * (np.eye(6, k=1) + np.eye(6, k=-1))))
+        assert not J.is_invariant(fk) and ls.Inertia(a4, s * K6).is_invariant(fk)
+    I4 = np.array([[1, 0.1, 0, 0.2], [0.1, 2, 0.1, 0.3], [0, 0.1, 3, 0.1], [0.2, 0.3, 0.1, 4.0]])
+    forms = {ls.SuslovSystem(ls.Inertia.from_mass_tensor(s * I4)).model().form for s in (1.0, 1e-12, 1e6)}
+    assert forms == {"reduced"}
+
+
+def test_omega_outside_d_is_rejected_at_any_scale():
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0, 4.0])))
+    for s in (1.0, 1e-10):
+        with pytest.raises(ValueError, match="Omega0 is not in the constraint subspace"):
+            ls.integrate(system, s * np.array([1.0, 0, 1, 0, 0, 0]), (0.0, 1.0), h=0.1)
+        bad = s * ls.so(4).hat([0.0, 0, 1, 0, 0, 0]) + s * 1e-3 * np.eye(4)  # not skew, relative to its size
+        with pytest.raises(ValueError, match="skew"):
+            ls.integrate(system, bad, (0.0, 1.0), h=0.1)
+
+
+def test_se_rejects_what_is_not_2_or_3():
+    for bad in (2.0, "3", None, True):
+        with pytest.raises(TypeError, match="se\\(n\\)"):
+            ls.se(bad)
+    with pytest.raises(ValueError, match="n = 4"):
+        ls.se(4)
+    assert ls.se(np.int64(3)).name == "se(3)"

@@ -182,6 +182,20 @@ def test_save_load_round_trip(tmp_path):
     for name in ("t", "xi", "omega", "Gamma", "g"):
         assert np.array_equal(getattr(back, name), getattr(sol, name))
     assert back.stats["nfev"] == sol.stats["nfev"] and back.success
+    # a batch with events: the records and the per-trajectory statistics (arrays) come back as they were
+    O = np.stack([Omega0, 1.5 * Omega0])
+    sol = ls.integrate(system, O, (0.0, 20.0), Gamma0=Gamma0, reconstruct=True, method="rkmk45",
+                       events=[ls.integrators.gamma_crossing(4, 2), ls.integrators.gamma_crossing(4, 3)])
+    back = ls.Solution.load(sol.save(tmp_path / "events"))
+    assert len(back.events) == 2 and sum(len(r) for r in sol.events) > 0
+    for a, b in zip(back.events, sol.events, strict=True):
+        for name in ("t", "index", "omega", "Gamma", "g"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        assert np.array_equal(a.Omega, b.Omega)
+    assert set(back.stats) == set(sol.stats)
+    for key in ("trajectory_nfev", "trajectory_steps", "trajectory_rejected", "t_stop"):
+        assert isinstance(back.stats[key], np.ndarray) and np.array_equal(back.stats[key], sol.stats[key]), key
+    assert np.array_equal(back.status, sol.status)
 
 
 def test_model_only_what_the_scene_needs():

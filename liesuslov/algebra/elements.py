@@ -27,7 +27,7 @@ def omega_coordinates(algebra, Omega, name: str = "Omega") -> np.ndarray:
         The algebra (dimension ``d``, representation of size ``m`` or none).
     Omega : array_like, shape (..., m, m) or (..., d)
         An array whose trailing ``(m, m)`` block lies in the image of the representation (skew-symmetric
-        on so(n), to ``1e-12 * max(1, max |Omega|)``) is read as matrices, ``vee(Omega)``; otherwise the
+        on so(n), to ``1e-12 max |Omega|``: relative) is read as matrices, ``vee(Omega)``; otherwise the
         last axis must be the ``d`` coordinates. On so(3) (``d = m = 3``) a stack of three coordinate
         vectors that happens to be skew is read as a matrix: pass another batch shape, or matrices.
     name : str
@@ -50,7 +50,7 @@ def omega_coordinates(algebra, Omega, name: str = "Omega") -> np.ndarray:
     is_so = algebra.name.startswith("so(")
     if m is not None and X.ndim >= 2 and X.shape[-2:] == (m, m):
         x = algebra.vee(X)
-        scale = max(1.0, float(np.max(np.abs(X), initial=0.0)))
+        scale = float(np.max(np.abs(X), initial=0.0))  # relative: a small Omega is tested as a large one
         if np.allclose(algebra.hat(x), X, rtol=0, atol=OMEGA_MATRIX_RTOL * scale):
             return x
         if X.shape[-1] != d:  # (m, m) could also be m coordinate vectors only when d == m

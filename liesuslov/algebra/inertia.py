@@ -273,23 +273,24 @@ class Inertia:
     def is_invariant(self, D: Subspace, tol: float = 1e-10) -> bool:
         """True iff ``J(D) ⊂ D`` (D is a sum of eigenspaces of J), the condition for form (2.3).
 
-        Tested as ``|x - P x| <= tol max(1, max|K|) max(1, |x|)`` for the images x of the basis rows
-        (P the orthogonal projector on D), sparse for a sparse basis and a diagonal mass tensor.
+        Tested as ``|x - P x| <= tol max(|x|, max|K|)`` for the images x of the unit basis rows (P the
+        orthogonal projector on D) — relative to J's own scale, so that it does not change when J is
+        rescaled (a body of 1e-12 kg m^2) — sparse for a sparse basis and a diagonal mass tensor.
         """
         self._same_algebra(D)
         if D.dim == 0:
             return True
         scale = self._max_abs_entry()
-        atol = tol * max(1.0, scale)
+        atol = tol * scale
         B = D.basis
         S = self._sparse_basis(B)
         if S is None:
-            return bool(np.all(D.contains(self(B), atol)))
+            return bool(np.all(D.contains(self(B), tol, atol=atol)))
         X = S.multiply(self.diagonal[None, :]).tocsr()  # J of each basis row, same pattern
         R = X - (X @ S.T) @ S
         res = np.sqrt(np.asarray(R.multiply(R).sum(axis=1)).ravel())
         nx = np.sqrt(np.asarray(X.multiply(X).sum(axis=1)).ravel())
-        return bool(np.all(res <= atol * np.maximum(1.0, nx)))
+        return bool(np.all(res <= tol * np.maximum(scale, nx)))
 
     # ------------------------------------------------------------------ helpers
     def _max_abs_entry(self) -> float:

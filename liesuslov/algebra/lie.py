@@ -145,6 +145,13 @@ class LieAlgebra:
         return np.einsum("...i,ijk,...k->...j", x, self._C, m, optimize=True)
 
     @cached_property
+    def bracket_scale(self) -> float:
+        """``max |C_ijk|``: the size of a bracket of unit vectors, against which the structure tests (which
+        brackets vanish or lie in a subspace) measure their residuals — so they do not change when the
+        constants are rescaled."""
+        return float(np.max(np.abs(self._C), initial=0.0))
+
+    @cached_property
     def killing_form(self) -> np.ndarray:
         """Killing form ``K_ij = tr(ad_{e_i} ad_{e_j})``, shape (d, d)."""
         ads = self.ad(np.eye(self._dim))
@@ -244,6 +251,9 @@ def se(n: int) -> LieAlgebra:
     -------
     LieAlgebra
     """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+        raise TypeError(f"n must be the integer 2 or 3 for se(n), got {type(n).__name__}")
+    n = int(n)
     if n == 2:
         R = np.zeros((3, 3, 3))
         R[0, 0, 1], R[0, 1, 0] = -1.0, 1.0

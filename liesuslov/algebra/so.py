@@ -69,6 +69,11 @@ class SpecialOrthogonalAlgebra(LieAlgebra):
     def _C(self):
         return self.structure_constants
 
+    @property
+    def bracket_scale(self) -> float:  # type: ignore[override]
+        """1: the constants of the basis E_ij are 0 and ±1 (without building the O(d^3) array)."""
+        return 1.0
+
     def is_abelian(self, tol: float = 1e-12) -> bool:
         return self.n == 2
 

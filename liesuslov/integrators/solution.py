@@ -11,6 +11,9 @@ import numpy as np
 __all__ = ["Solution"]
 
 _ARRAYS = ("t", "xi", "omega", "Gamma", "g")
+_STAT = "__stats__"  # file keys of the per-trajectory statistics (arrays)
+_EVENT = "__event"  # file keys of the event records: __event{j}__{field}
+_EVENT_FIELDS = ("t", "index", "omega", "Gamma", "g")
 
 
 @dataclass
@@ -117,22 +120,42 @@ class Solution:
 
     # ------------------------------------------------------------------ persistence
     def save(self, path) -> Path:
-        """Write every array, the stats and the status to a ``.npz`` file (lossless round trip)."""
+        """Write every array, the events, the stats and the status to a ``.npz`` file (lossless round trip;
+        not the dense output)."""
         path = Path(path)
         arrays = {name: getattr(self, name) for name in _ARRAYS if getattr(self, name) is not None}
-        meta = {"stats": self.stats, "status": self.status.tolist(), "message": self.message, "n": self.n,
-                "algebra_name": self.algebra_name}
+        stats = {}
+        for key, value in self.stats.items():
+            if isinstance(value, np.ndarray):  # per-trajectory statistics stay arrays
+                arrays[f"{_STAT}{key}"] = value
+            else:
+                stats[key] = value
+        for j, rec in enumerate(self.events):
+            for field_name in _EVENT_FIELDS:
+                value = getattr(rec, field_name)
+                if value is not None:
+                    arrays[f"{_EVENT}{j}__{field_name}"] = value
+        meta = {"stats": stats, "status": self.status.tolist(), "message": self.message, "n": self.n,
+                "algebra_name": self.algebra_name, "events": len(self.events)}
         np.savez(path, **arrays, __meta__=np.array(json.dumps(meta, default=_jsonable)))
         return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
 
     @classmethod
     def load(cls, path) -> Solution:
         """Read a file written by :meth:`save`."""
+        from .events import EventRecord
+
         with np.load(Path(path), allow_pickle=False) as data:
             arrays = {name: data[name] for name in _ARRAYS if name in data.files}
             meta = json.loads(str(data["__meta__"]))
-        return cls(**arrays, stats=meta["stats"], status=meta["status"], message=meta["message"],
-                   n=meta["n"], algebra_name=meta["algebra_name"])
+            stats = {**meta["stats"], **{k[len(_STAT):]: data[k] for k in data.files if k.startswith(_STAT)}}
+            events = []
+            for j in range(meta.get("events", 0)):
+                fields = {f: data[f"{_EVENT}{j}__{f}"] if f"{_EVENT}{j}__{f}" in data.files else None
+                          for f in _EVENT_FIELDS}
+                events.append(EventRecord(**fields, n=meta["n"], algebra_name=meta["algebra_name"]))
+        return cls(**arrays, stats=stats, status=np.asarray(meta["status"], dtype=np.int64),
+                   message=meta["message"], n=meta["n"], algebra_name=meta["algebra_name"], events=events)
 
     def to_xarray(self):
         """An ``xarray.Dataset``: dims ``time``, ``batch_0``..., components (needs ``liesuslov[xarray]``)."""
