@@ -17,6 +17,7 @@ from functools import cached_property
 
 import numpy as np
 
+from .._rows import rows_at
 from .._validation import as_float_array, check_symmetric
 from .lie import LieAlgebra
 from .so import SpecialOrthogonalAlgebra, so
@@ -228,7 +229,7 @@ class Inertia:
         if self.diagonal is not None:
             return x * self.diagonal
         if self._dense():
-            return x @ self.matrix
+            return rows_at(x, self.matrix)  # (the same bits for a row alone or in a batch)
         alg, I = self.algebra, self.mass_tensor
         X = alg.hat(x)
         IX = I @ X

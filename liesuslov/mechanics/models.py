@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._rows import rows_at
 from ..algebra import Subspace
 from .forces import gyroscopic_torque, wedge_coordinates
 
@@ -223,16 +224,16 @@ def _basis_maps(system: SuslovSystem, B: np.ndarray) -> dict:
         BR = alg.hat(B).reshape(B.shape[0], r * r)  # hat of the basis rows (no (d, r, r) basis tensor on so(n))
 
         def omega_matrix(xi):
-            return (xi @ BR).reshape(xi.shape[:-1] + (r, r))
+            return rows_at(xi, BR).reshape(xi.shape[:-1] + (r, r))
 
         def Gamma_dot(xi, G):
-            return -((xi @ BR).reshape(xi.shape[:-1] + (r, r)) @ G[..., :, None])[..., 0]
+            return -(rows_at(xi, BR).reshape(xi.shape[:-1] + (r, r)) @ G[..., :, None])[..., 0]
 
     def omega_coords(xi):
-        return xi @ B
+        return rows_at(xi, B)
 
     def xi_from_coords(x):
-        return x @ Bt
+        return rows_at(x, Bt)
 
     return dict(omega_matrix=omega_matrix, omega_coords=omega_coords, xi_from_coords=xi_from_coords,
                 Gamma_dot=Gamma_dot)
@@ -258,7 +259,7 @@ def _general_field(system: SuslovSystem, B, KD, form: str):
             kk = k * k
 
             def quadratic(xi, G):
-                return (xi[..., :, None] * xi[..., None, :]).reshape(xi.shape[:-1] + (kk,)) @ Qf
+                return rows_at((xi[..., :, None] * xi[..., None, :]).reshape(xi.shape[:-1] + (kk,)), Qf)
             parts.append("quadratic tensor")
         else:  # so(n) with a large D: [M, X] = P - P^T with P = M X, one matmul
             n = system.n
@@ -267,9 +268,9 @@ def _general_field(system: SuslovSystem, B, KD, form: str):
 
             def quadratic(xi, G):
                 sh = xi.shape[:-1]
-                X = (xi @ BR).reshape(sh + (n, n))
-                M = (xi @ BKR).reshape(sh + (n, n))
-                return (M @ X).reshape(sh + (n * n,)) @ W
+                X = rows_at(xi, BR).reshape(sh + (n, n))
+                M = rows_at(xi, BKR).reshape(sh + (n, n))
+                return rows_at((M @ X).reshape(sh + (n * n,)), W)
             parts.append("quadratic by commutators")
         terms.append(quadratic)
     pot = system.potential
@@ -279,7 +280,7 @@ def _general_field(system: SuslovSystem, B, KD, form: str):
             T1 = wedge_coordinates(pot.B, np.eye(n)) @ Lt  # (n, k): tau is linear in Gamma
 
             def potential_term(xi, G):
-                return G @ T1
+                return rows_at(G, T1)
             parts.append("linear potential")
         elif pot.kind == "quadratic":
             S = pot.matrix  # tau = sum_lm G_l G_m vee(S e_l ∧ e_m)
@@ -287,7 +288,7 @@ def _general_field(system: SuslovSystem, B, KD, form: str):
             nn = n * n
 
             def potential_term(xi, G):
-                return (G[..., :, None] * G[..., None, :]).reshape(G.shape[:-1] + (nn,)) @ T2
+                return rows_at((G[..., :, None] * G[..., None, :]).reshape(G.shape[:-1] + (nn,)), T2)
             parts.append("quadratic potential")
         else:
             W = _skew_map(n, Lt)
@@ -296,7 +297,7 @@ def _general_field(system: SuslovSystem, B, KD, form: str):
 
             def potential_term(xi, G):
                 g = grad(G)
-                return (g[..., :, None] * G[..., None, :]).reshape(G.shape[:-1] + (nn,)) @ W
+                return rows_at((g[..., :, None] * G[..., None, :]).reshape(G.shape[:-1] + (nn,)), W)
             parts.append("potential gradient")
         terms.append(potential_term)
     if system.gyroscopic != 0.0:
@@ -306,7 +307,7 @@ def _general_field(system: SuslovSystem, B, KD, form: str):
         k3 = 3 * k
 
         def gyro_term(xi, G):
-            return (xi[..., :, None] * G[..., None, :]).reshape(G.shape[:-1] + (k3,)) @ Gf
+            return rows_at((xi[..., :, None] * G[..., None, :]).reshape(G.shape[:-1] + (k3,)), Gf)
         terms.append(gyro_term)
         parts.append("gyroscopic")
     return _sum_terms(terms), ", ".join(parts) or "zero field"
@@ -379,7 +380,7 @@ def _fk_symmetric_field(system: SuslovSystem, KD: np.ndarray):
             return G[..., :m] * G[..., m:] * c
         path = "Fedorov–Kozlov O(n), diagonal quadratic potential"
     else:
-        grad = pot.grad if pot.kind != "quadratic" else (lambda G, S=pot.matrix: G @ S)
+        grad = pot.grad if pot.kind != "quadratic" else (lambda G, S=pot.matrix: rows_at(G, S))
         if diagonal:
             inv = 1.0 / kd
 
@@ -390,7 +391,7 @@ def _fk_symmetric_field(system: SuslovSystem, KD: np.ndarray):
         else:
             def field(xi, G):
                 g = grad(G)
-                return (g[..., :m] * G[..., m:] - G[..., :m] * g[..., m:]) @ KDinv
+                return rows_at(g[..., :m] * G[..., m:] - G[..., :m] * g[..., m:], KDinv)
             path = "Fedorov–Kozlov O(n^2) (K_D not diagonal), potential gradient"
     if eps == 0.0:
         if field is None:
@@ -408,7 +409,7 @@ def _fk_symmetric_field(system: SuslovSystem, KD: np.ndarray):
         Cg = np.diag(sign) @ KDinv
 
         def gyro(xi, G):
-            return (G[..., 2:3] * xi[..., ::-1]) @ Cg
+            return rows_at(G[..., 2:3] * xi[..., ::-1], Cg)
     if field is None:
         return gyro, path + " + gyroscopic"
     base = field
@@ -429,8 +430,8 @@ def _multiplier_model(system: SuslovSystem, has_gamma: bool) -> Model:
 
     def xi_dot(x, G):
         f = torque(x, G)
-        lam = -((f @ Kinv) @ A.T) @ Sinv
-        return (f + lam @ A) @ Kinv
+        lam = -rows_at(rows_at(rows_at(f, Kinv), A.T), Sinv)
+        return rows_at(f + rows_at(lam, A), Kinv)
 
     def omega_coords(x):
         return np.array(x, dtype=float, copy=True)

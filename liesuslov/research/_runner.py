@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from .._rows import rows_at
 from .._validation import as_float_array, check_positive
 from ..integrators import integrate
 from ..integrators.events import EventRecord, LinearEvent
@@ -64,22 +65,8 @@ class Batch:
 
     def reduced(self, omega: np.ndarray, Gamma: np.ndarray | None) -> np.ndarray:
         """The reduced state ``(xi, Gamma)`` (xi = coordinates in D's orthonormal basis), (..., k [+ n])."""
-        xi = rows_matmul(omega, self.system.constraints.basis.T)
+        xi = rows_at(omega, self.system.constraints.basis.T)
         return xi if Gamma is None else np.concatenate([xi, Gamma], axis=-1)
-
-
-def rows_matmul(x: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """``x @ M`` for ``x`` of shape (..., p), summed in a fixed order: each row's bits do not depend on its batch.
-
-    ``np.matmul`` hands batches to BLAS, whose kernel (and summation order) may depend on the number of rows;
-    a trajectory's result must not depend on its batch mates, so the research tools use this instead.
-    """
-    x = np.asarray(x, dtype=float)
-    M = np.asarray(M, dtype=float)
-    out = np.zeros(x.shape[:-1] + M.shape[1:])
-    for j in range(M.shape[0]):
-        out = out + x[..., j, None] * M[j]
-    return out
 
 
 def per_row(f, *arrays):

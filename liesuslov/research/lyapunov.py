@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .._rows import rows_at
 from ..integrators import integrate
 from . import _runner as R
 
@@ -153,7 +154,7 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
     B = b.size
     Dbasis = system.constraints.basis
     k = Dbasis.shape[0]
-    xi0 = R.rows_matmul(b.omega, Dbasis.T)
+    xi0 = rows_at(b.omega, Dbasis.T)
     xi = xi0
     G = b.Gamma
     e = _tangent(seed_key, xi if G is None else np.concatenate([xi, G], axis=-1), k, G)
@@ -167,7 +168,7 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
     status = np.zeros(B, dtype=int)
     t_prev = t0
     for j, t_next in enumerate(times):
-        om = R.rows_matmul(np.concatenate([xi, xi_p]), Dbasis)
+        om = rows_at(np.concatenate([xi, xi_p]), Dbasis)
         kw = dict(opts)
         if G is not None:
             kw["Gamma0"] = np.concatenate([G, G_p])
@@ -175,7 +176,7 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
         st = np.broadcast_to(np.asarray(sol.status), (2 * B,))
         bad = (st[:B] < 0) | (st[B:] < 0)
         om_end = sol.omega[-1]
-        xi_all = R.rows_matmul(om_end, Dbasis.T)
+        xi_all = rows_at(om_end, Dbasis.T)
         xi, xi_q = xi_all[:B], xi_all[B:]
         d = xi_q - xi
         if G is not None:
