@@ -20,10 +20,10 @@ def rows_at(x, M) -> np.ndarray:
     Parameters
     ----------
     x : array_like, shape (..., p)
-    M : array_like, shape (p, q)
+    M : array_like, shape (p, q) or (p,)
 
     Returns
     -------
-    ndarray, shape (..., q)
+    ndarray, shape (..., q), or (...) for a vector ``M``
     """
-    return np.einsum("...i,ij->...j", x, M)
+    return np.einsum("...i,i->..." if np.ndim(M) == 1 else "...i,ij->...j", x, M)

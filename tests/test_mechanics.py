@@ -246,6 +246,40 @@ def test_energy_is_conserved_by_the_reference_field_for_any_D(seed, n, r):
     assert np.all(D.contains(xdot, 1e-10))  # the constraints hold at first order
 
 
+def _rows_alone_equal(f, *arrays) -> bool:
+    """Every row of ``f(*arrays)`` (arrays batch-first) equals, bit for bit, ``f`` on that row alone."""
+    full = f(*arrays)
+    full = full if isinstance(full, tuple) else (full,)
+    for b in range(arrays[0].shape[0]):
+        one = f(*(a[b:b + 1] for a in arrays))
+        one = one if isinstance(one, tuple) else (one,)
+        if not all(x is None or np.array_equal(x[b:b + 1], y) for x, y in zip(full, one, strict=True)):
+            return False
+    return True
+
+
+def test_reference_form_gives_a_row_the_same_bits_alone_or_in_a_batch():
+    """A dense D, a full mass tensor and a full quadratic potential (so(5)), and se(3) with a full K: the
+    reference form's products of a batch with matrices went through BLAS (matmul, einsum with optimize),
+    which sums a row differently by its position in the batch (most of 200 rows differed from themselves
+    alone); the research tools evaluate it on batches."""
+    rng = np.random.default_rng(5)
+    D = Subspace.annihilator(so(5), rng.normal(size=(3, 10)))
+    S = rng.normal(size=(5, 5))
+    s = SuslovSystem(Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0, 4.0, 5.0]) + 0.1), constraints=D,
+                        potential=QuadraticPotential(S + S.T))
+    x = 0.3 * rng.normal(size=(200, D.dim)) @ D.basis
+    G = unit(rng, (200,), 5)
+    for method in (s.rhs, s.energy, s.multipliers, s.divergence):
+        assert _rows_alone_equal(method, x, G), method.__name__
+    K = rng.normal(size=(6, 6))
+    D6 = Subspace.annihilator(se(3), rng.normal(size=(2, 6)))
+    s6 = SuslovSystem(Inertia(se(3), K @ K.T + 6 * np.eye(6)), constraints=D6)
+    x6 = rng.normal(size=(200, D6.dim)) @ D6.basis
+    for method in (s6.rhs, s6.multipliers, s6.divergence):
+        assert _rows_alone_equal(method, x6), method.__name__
+
+
 # ====================================================================== the forms
 def coordinate_subspace(n, pairs):
     alg = so(n)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._rows import rows_at
 from .._validation import as_float_array
 
 __all__ = ["Potential", "ZeroPotential", "LinearPotential", "QuadraticPotential", "FamilyPotential",
@@ -129,7 +130,7 @@ class LinearPotential(Potential):
         return not np.any(self.B)
 
     def V(self, Gamma) -> np.ndarray:
-        return np.asarray(Gamma, dtype=float) @ self.B
+        return rows_at(np.asarray(Gamma, dtype=float), self.B)
 
     def grad(self, Gamma) -> np.ndarray:
         return np.zeros(np.shape(Gamma)) + self.B
@@ -179,14 +180,14 @@ class QuadraticPotential(Potential):
     def V(self, Gamma) -> np.ndarray:
         G = np.asarray(Gamma, dtype=float)
         if self.diagonal is not None:
-            return 0.5 * ((G * G) @ self.diagonal)
-        return 0.5 * np.sum((G @ self.matrix) * G, axis=-1)
+            return 0.5 * rows_at(G * G, self.diagonal)
+        return 0.5 * np.sum(rows_at(G, self.matrix) * G, axis=-1)
 
     def grad(self, Gamma) -> np.ndarray:
         G = np.asarray(Gamma, dtype=float)
         if self.diagonal is not None:
             return G * self.diagonal
-        return G @ self.matrix
+        return rows_at(G, self.matrix)
 
 
 class FamilyPotential(Potential):

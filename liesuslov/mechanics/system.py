@@ -10,7 +10,9 @@ form, ``w = (-Omega_23, Omega_13, -Omega_12)``; in coordinates it is ``eps * vee
 other Lie algebra (V = 0) this is the Euler–Poincaré–Suslov system ``dM/dt = ad*_Omega M + lambda a``.
 
 :class:`SuslovSystem` holds the reference (multiplier) form and its diagnostics; :meth:`SuslovSystem.model`
-returns the smallest exact model of the scene for the integrators (:mod:`.models`).
+returns the smallest exact model of the scene for the integrators (:mod:`.models`). Its batch methods give a
+row the same bits alone or in any batch (products with matrices through :func:`liesuslov._rows.rows_at`, not
+BLAS).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._rows import rows_at
 from .._validation import as_float_array, check_real
 from ..algebra import Inertia, SpecialOrthogonalAlgebra, Subspace, omega_coordinates, suslov_distribution
 from .forces import gyroscopic_torque, wedge_coordinates
@@ -221,7 +224,7 @@ class SuslovSystem:
         if not np.all(D.contains(x, 1e-9)):
             raise ValueError(f"{name} is not in D: the constraints <a^i, Omega> = 0 fail (largest violation "
                              f"{float(np.max(np.abs(x @ self.covectors.T))):.3g})")
-        return x @ D.basis.T
+        return rows_at(x, D.basis.T)
 
     # ------------------------------------------------------------------ reference terms
     def torque(self, x: np.ndarray, Gamma: np.ndarray | None) -> np.ndarray:
@@ -248,7 +251,7 @@ class SuslovSystem:
 
     def _multipliers_of(self, f: np.ndarray) -> np.ndarray:
         A, Kinv, Sinv = self.reaction
-        return -((f @ Kinv) @ A.T) @ Sinv  # S symmetric
+        return -rows_at(rows_at(rows_at(f, Kinv), A.T), Sinv)  # S symmetric
 
     # ------------------------------------------------------------------ public reference form
     def energy(self, Omega, Gamma=None) -> np.ndarray:
@@ -287,7 +290,7 @@ class SuslovSystem:
         G = self._gamma(Gamma, required=self.needs_gamma)
         f = self.torque(x, G)
         A, Kinv, _ = self.reaction
-        xdot = (f + self._multipliers_of(f) @ A) @ Kinv
+        xdot = rows_at(f + rows_at(self._multipliers_of(f), A), Kinv)
         if G is None:
             return xdot, None
         Gdot = -(self.algebra.hat(x) @ G[..., :, None])[..., 0]
@@ -314,7 +317,7 @@ class SuslovSystem:
         K = self.inertia.matrix
         L = np.linalg.solve(B @ K @ B.T, B)  # (k, d)
         xk = x[..., None, :]
-        a1, b1 = np.broadcast_arrays(B, (x @ K)[..., None, :])
+        a1, b1 = np.broadcast_arrays(B, rows_at(x, K)[..., None, :])
         a2, b2 = np.broadcast_arrays(xk, B @ K)
         t = self.algebra.coad(a1, b1) + self.algebra.coad(a2, b2)  # (..., k, d)
         if self.gyroscopic != 0.0:

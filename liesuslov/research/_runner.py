@@ -69,20 +69,6 @@ class Batch:
         return xi if Gamma is None else np.concatenate([xi, Gamma], axis=-1)
 
 
-def per_row(f, *arrays):
-    """``f`` applied to each row ``a[k:k+1]`` of the flat batch arrays (None passed through), stacked again.
-
-    The system's methods work on batches through BLAS; called row by row a trajectory gets the same bits
-    alone or in any batch. ``f`` returns an array or a tuple of arrays (or None) with the row axis first.
-    """
-    B = next(a.shape[0] for a in arrays if a is not None)
-    outs = [f(*(None if a is None else a[k:k + 1] for a in arrays)) for k in range(B)]
-    if isinstance(outs[0], tuple):
-        return tuple(None if outs[0][i] is None else np.concatenate([o[i] for o in outs])
-                     for i in range(len(outs[0])))
-    return np.concatenate([np.asarray(o).reshape((1,) + np.shape(o)[1:]) for o in outs])
-
-
 def prepare(system, Omega0, Gamma0=None, g0=None) -> Batch:
     """Check ``system``, ``Omega0`` (in D), ``Gamma0`` (unit) and ``g0`` (SO(n)); broadcast and flatten."""
     from ..mechanics import SuslovSystem

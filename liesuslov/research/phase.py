@@ -448,7 +448,7 @@ def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, st
     """
     B = b.size
     m = system.n
-    xdot, Gdot = R.per_row(system.rhs, b.omega, b.Gamma)
+    xdot, Gdot = system.rhs(b.omega, b.Gamma)
     off = np.sum(xdot * b.omega, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot * b.Gamma, axis=-1))
     plane = R.make_plane(omega=xdot, Gamma=Gdot, offset=off, direction=1)
     speed = np.sqrt(np.sum(xdot ** 2, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot ** 2, axis=-1)))
@@ -537,7 +537,7 @@ def _axes(system, b, Rm, Rt, ok, axis, angle, kind) -> None:
     error of ``R`` estimated by the checking re-integration ``Rt``: an exactly fixed vector is moved by at
     most ``eps`` (plus ``Rt``'s own, much smaller, error).
     """
-    M0 = _vec3(R.per_row(system.inertia, b.omega))
+    M0 = _vec3(system.inertia(b.omega))
     nM = np.linalg.norm(M0, axis=-1)
     for k in np.nonzero(ok)[0]:
         Rk = Rm[k]
@@ -560,8 +560,8 @@ def _axes(system, b, Rm, Rt, ok, axis, angle, kind) -> None:
 
 def _montgomery(system, b, T, ok, opts, samples, dyn, geo) -> None:
     """Free body: ``2 E T / |M0|`` and the solid angle on the left of ``M/|M|`` over one period."""
-    E = R.per_row(system.energy, b.omega)
-    M0 = _vec3(R.per_row(system.inertia, b.omega))
+    E = system.energy(b.omega)
+    M0 = _vec3(system.inertia(b.omega))
     dyn[ok] = (2.0 * E * T / np.linalg.norm(M0, axis=-1))[ok]
     from ..integrators import integrate
 
