@@ -38,11 +38,20 @@ def as_float_array(x: Any, name: str, *, ndim_min: int = 0, tail: tuple[int, ...
     """
     if x is None:  # np.asarray(None, dtype=float) would be a silent NaN
         raise TypeError(f"{name} must be a real numeric array, got None")
-    # float(complex) would drop the imaginary part with only a warning: a complex value is a wrong type
-    real_array = isinstance(x, np.ndarray) and x.dtype.kind in "biuf"  # the common case, checked cheaply
-    if not real_array and (np.iscomplexobj(x) or (isinstance(x, (list, tuple)) and _has_complex(x))):
-        raise TypeError(f"{name} must be real, got complex values; pass the real part explicitly "
-                        f"(np.real({name})) if the imaginary part is rounding noise")
+    if not (isinstance(x, np.ndarray) and x.dtype.kind in "iuf"):  # (the common case, checked cheaply)
+        try:
+            x = np.asarray(x)  # its own dtype first: what float conversion would hide
+        except ValueError as exc:  # nested sequences of unequal lengths
+            raise ValueError(f"{name} must be a rectangular array (nested sequences of equal lengths), got a "
+                             f"ragged {type(x).__name__}") from exc
+        kind = x.dtype.kind
+        # float(complex) would drop the imaginary part with only a warning: a complex value is a wrong type
+        if kind == "c" or (kind == "O" and _has_complex(x.ravel().tolist())):
+            raise TypeError(f"{name} must be real, got complex values; pass the real part explicitly "
+                            f"(np.real({name})) if the imaginary part is rounding noise")
+        if kind in "bUS":  # float("0.3") and float(True) would read them
+            what = "booleans" if kind == "b" else "strings"
+            raise TypeError(f"{name} must be a real numeric array, got {what}; pass numbers")
     try:
         arr = np.asarray(x, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -136,6 +145,22 @@ def check_rotations(g: np.ndarray, name: str, *, tol: float = 1e-8) -> None:
     if np.any(np.linalg.det(g) < 0):
         raise ValueError(f"{name} must be in SO({k}): some {name} have det = -1 (reflections); "
                          "flip the sign of one column")
+
+
+def check_rigid_motions(g: np.ndarray, name: str, *, tol: float = 1e-8) -> None:
+    """Raise ``ValueError`` unless every ``g`` (..., k+1, k+1) is in SE(k): ``[[R, p], [0, 1]]`` with R in SO(k)
+    (:func:`check_rotations`) and the last row ``(0, ..., 0, 1)`` exactly."""
+    k = g.shape[-1] - 1
+    if g.ndim < 2 or g.shape[-2] != k + 1 or k < 1:
+        raise ValueError(f"{name} must be square matrices (..., k+1, k+1) of SE(k), got shape {g.shape}")
+    last = np.zeros(k + 1)
+    last[k] = 1.0
+    rows = g.reshape(-1, k + 1, k + 1)[:, k]
+    bad = np.flatnonzero(~np.all(rows == last, axis=-1))
+    if bad.size:
+        raise ValueError(f"{name} must be in SE({k}), of the form [[R, p], [0, 1]]: its last row must be "
+                         f"(0, ..., 0, 1), got {rows[bad[0]].tolist()} (flat batch index {int(bad[0])})")
+    check_rotations(g[..., :k, :k], f"{name}[..., :{k}, :{k}]", tol=tol)
 
 
 def unit_vectors(x: np.ndarray, name: str, *, tol: float = 1e-8) -> np.ndarray:

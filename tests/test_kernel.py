@@ -540,7 +540,8 @@ def test_a_family_missing_from_the_cache_is_compiled_in_a_child_process(monkeypa
     from liesuslov.integrators.kernel import common, warm, wrapper
 
     calls = []
-    monkeypatch.setattr(wrapper, "compile_kinds", lambda kinds, processes=None: calls.append((kinds, processes)))
+    compile_kinds = warm.compile_kinds  # (the wrapper imports it from warm when it needs it: patched there)
+    monkeypatch.setattr(warm, "compile_kinds", lambda kinds, processes=None: calls.append((kinds, processes)))
     monkeypatch.setattr(wrapper._solve_one._cache, "load_overload", lambda sig, ctx: None)  # a cache miss
     monkeypatch.delenv(warm.COMPILE_HERE_ENV, raising=False)
     wrapper._compile_apart(2, ())
@@ -555,7 +556,7 @@ def test_a_family_missing_from_the_cache_is_compiled_in_a_child_process(monkeypa
 
     def failing(kinds, processes=None):
         raise RuntimeError("compiling kind 'so3' failed: no space left")
-    monkeypatch.setattr(wrapper, "compile_kinds", failing)
+    monkeypatch.setattr(warm, "compile_kinds", failing)
     monkeypatch.setattr(wrapper._solve_one._cache, "load_overload", lambda sig, ctx: None)
     wrapper._compile_apart(1, ())  # no exception: the caller compiles
 
@@ -572,7 +573,7 @@ def test_a_family_missing_from_the_cache_is_compiled_in_a_child_process(monkeypa
 
     monkeypatch.setattr(subprocess, "Popen", Done)
     monkeypatch.setenv("PYTHONPATH", "/elsewhere")
-    warm.compile_kinds(["none"], processes=1)
+    compile_kinds(["none"], processes=1)
     root = str(Path(warm.__file__).resolve().parents[3])
     assert seen[warm.COMPILE_HERE_ENV] == "1" and seen["PYTHONPATH"].split(os.pathsep) == [root, "/elsewhere"]
     assert set(warm.FAMILY_KIND.values()) == set(warm.FAMILY_KINDS)

@@ -110,6 +110,58 @@ def test_nonfinite_field_at_t0_fails_at_once():
     sol = ls.integrate(system, [0.0, 0.0, 0.5], (0.0, 1.0), Gamma0=[0.0, 0.0, 1.0], method="rkmk45")
     assert sol.status == -1 and sol.stats["t_stop"] == 0.0 and sol.stats["steps"] == 0
     assert "non-finite" in sol.message
+    # the initial state is reported (NaN only after the failure time): one trajectory, and a batch with t_eval
+    assert sol.t.tolist() == [0.0] and sol.omega[0].tolist() == [0.0, 0.0, 0.5]
+    batch = ls.integrate(system, [[0.0, 0.0, 0.5], [0.0, 0.0, 0.7]], (0.0, 1.0), Gamma0=[0.0, 0.0, 1.0],
+                         method="rkmk45", t_eval=[0.0, 0.5, 1.0])
+    assert batch.status.tolist() == [-1, -1] and np.all(np.isfinite(batch.omega[0]))
+    assert np.all(np.isnan(batch.omega[1:]))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_fixed_step_below_the_resolution_of_t_fails_at_once(backend):
+    """h below ten ulps of t in t_span: the grid t0 + i h cannot be represented (the compiled loop took one step
+    over the whole span for h = 1e-19 — ceil(span / h) overflowed — and reported success); both backends fail at
+    t0 with the reason, at once (numpy ran 10^7 steps for h = 1e-300)."""
+    system = free_body()
+    for span, h in (((0.0, 3.0), 1e-19), ((0.0, 2.0), 5e-324), ((1e16, 1e16 + 8.0), 0.05), ((0.0, 1e300), 0.05)):
+        sol = ls.integrate(system, [0.3, -0.5, 0.7], span, method="rkmk4", h=h, reconstruct=True, backend=backend)
+        assert sol.status == -1 and sol.stats["t_stop"] == span[0] and sol.stats["steps"] == 0
+        assert "ten ulps" in sol.message
+    # a huge max_steps is no limit (the compiled loop counts in int64)
+    sol = ls.integrate(system, [0.3, -0.5, 0.7], (0.0, 2.0), method="rkmk4", h=0.1, max_steps=2**70, backend=backend)
+    assert sol.success and sol.stats["steps"] == 20
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_first_step_whose_norms_overflow_fails_at_once(backend):
+    """A field far beyond atol (|f| / atol overflows the norms of the starting step): the estimate was NaN, which
+    numpy rejected ~10^7 times (a hang) and the kernel called a non-finite state; now a step of 0, failed at once
+    by the step-size floor, on both backends."""
+    system, Omega0, Gamma0 = kt_body()
+    sol = ls.integrate(system, Omega0, (0.0, 2.0), Gamma0=Gamma0, method="rkmk45", atol=1e-300, backend=backend)
+    assert sol.status == -1 and sol.stats["t_stop"] == 0.0 and sol.stats["rejected"] == 0
+    assert "underflow" in sol.message
+    ok = ls.integrate(system, Omega0, (0.0, 2.0), Gamma0=Gamma0, method="rkmk45", atol=1e-300, first_step=1e-3,
+                      backend=backend)
+    assert ok.success
+
+
+def test_bad_initial_data_is_named():
+    system = free_body()
+    with pytest.raises(ValueError, match="Omega0 must be a rectangular array"):
+        ls.integrate(system, [[0.1, 0.2, 0.3], [0.3]], (0.0, 1.0), method="rkmk45")
+    with pytest.raises(TypeError, match="Omega0 must be a real numeric array, got strings"):
+        ls.integrate(system, ["0.3", "-0.5", "0.7"], (0.0, 1.0), method="rkmk45")
+    with pytest.raises(TypeError, match="Omega0 must be a real numeric array, got booleans"):
+        ls.integrate(system, np.array([True, False, True]), (0.0, 1.0), method="rkmk45")
+    se3 = ls.SuslovSystem(ls.Inertia(ls.se(3), np.eye(6)), constraints="none")
+    g0 = np.eye(4)
+    g0[:3, 3] = [1.0, 2.0, 3.0]
+    assert ls.integrate(se3, 0.1 * np.ones(6), (0.0, 1.0), method="rkmk4", h=0.1, reconstruct=True, g0=g0).success
+    for bad in (2.0 * np.eye(4), np.diag([1.0, 1.0, -1.0, 1.0]), np.zeros((4, 4))):
+        with pytest.raises(ValueError, match=r"g0.* must be in S[EO]\(3\)"):
+            ls.integrate(se3, 0.1 * np.ones(6), (0.0, 1.0), method="rkmk4", h=0.1, reconstruct=True, g0=bad)
 
 
 def test_batch_without_t_eval_reports_the_two_ends():
@@ -131,6 +183,53 @@ def test_t_eval_does_not_change_the_steps(backend):
     assert np.array_equal(many.g[-1], end.g[-1])
     om_ref, g_ref = embedded_reference(system, ls.so(4).vee(Omega0), 20.0, many.t, Gamma0)
     assert np.max(np.abs(many.g - g_ref)) < 1e-5
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_output_times_leave_the_trajectory_bitwise_unchanged(backend):
+    """rkmk853 evaluates the field at a step's end only for its extension, and the next step reuses it: it
+    read the vertical carried by the chart (phi(-Theta) g^T gamma) where a step without outputs evaluates
+    g1^T gamma — output times changed the last bits of everything after them (up to 6e-12 at t = 60)."""
+    system, Omega0, Gamma0 = kt_body()
+    kw = dict(Gamma0=Gamma0, reconstruct=True, method="rkmk853", rtol=1e-9, backend=backend)
+    end = ls.integrate(system, Omega0, (0.0, 30.0), t_eval=[30.0], **kw)
+    many = ls.integrate(system, Omega0, (0.0, 30.0), t_eval=np.linspace(0.0, 30.0, 301), **kw)
+    assert many.stats["steps"] == end.stats["steps"]
+    assert np.array_equal(many.g[-1], end.g[-1]) and np.array_equal(many.omega[-1], end.omega[-1])
+    dense = ls.integrate(system, Omega0, (0.0, 30.0), dense_output=True, **kw)
+    assert np.array_equal(dense.at([29.5]).g[0], dense.at(np.linspace(0.0, 29.5, 60)).g[-1])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_terminal_count_stops_at_that_crossing(backend):
+    """scipy's integer terminal: the N-th crossing stops the trajectory (a LinearEvent on the compiled path,
+    a callable on numpy); 0 never stops; the crossings are the Euler top's zeros of w_2."""
+    system = free_body()
+    w0 = np.array([[0.3, 1.0, 0.4], [0.5, 0.6, -0.4]])
+
+    def w2(t, Omega, Gamma, g):
+        return Omega[..., 0, 2]
+    w2.terminal = 3
+    kw = dict(reconstruct=True, method="rkmk853", rtol=1e-11, atol=1e-13, backend=backend)
+    for ev in (coordinate_plane("omega", 1, dim=3, terminal=3), w2):
+        sol = ls.integrate(system, ls.hat3(w0), (0.0, 200.0), events=ev, **kw)
+        assert sol.status.tolist() == [1, 1]
+        rec = sol.events[0]
+        assert rec.index.tolist() == [0, 0, 0, 1, 1, 1]
+        for b in range(2):
+            tb = rec.t[rec.index == b]
+            assert sol.stats["t_stop"][b] == tb[-1] and np.all(np.diff(tb) > 0)
+            top = EulerTop(J3, w0[b])
+            assert max(abs(top.state(tc)[1]) for tc in tb) < 1e-8
+    never = ls.integrate(system, ls.hat3(w0), (0.0, 200.0), events=coordinate_plane("omega", 1, dim=3, terminal=0),
+                         **kw)
+    assert never.status.tolist() == [0, 0] and len(never.events[0]) > 6
+    for bad, exc in ((-1, ValueError), (1.5, TypeError), ("yes", TypeError)):
+        with pytest.raises(exc, match="terminal"):
+            coordinate_plane("omega", 1, dim=3, terminal=bad)
+        w2.terminal = bad
+        with pytest.raises(exc, match="event.terminal"):
+            ls.integrate(system, ls.hat3(w0), (0.0, 1.0), events=w2, **kw)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

@@ -169,7 +169,11 @@ class LieAlgebra:
         return np.einsum("iab,jba->ij", ads, ads)
 
     def is_abelian(self, tol: float = 1e-12) -> bool:
-        """True when every bracket vanishes (to ``tol`` times the constants' scale)."""
+        """True when every bracket vanishes: ``max |C_ijk| <= tol``.
+
+        Absolute, not relative to the constants' scale: C = 0 in every basis of an abelian algebra, and
+        a relative test would only accept C = 0 exactly; ``tol`` absorbs rounding in constants computed
+        elsewhere (e.g. from commutators of matrices of size ~1)."""
         return bool(np.max(np.abs(self._C), initial=0.0) <= tol)
 
     # ------------------------------------------------------------------ representation

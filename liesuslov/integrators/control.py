@@ -27,11 +27,13 @@ ulps of t wide (:func:`bracket_closed`, :func:`closest_end`).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = ["SAFETY", "MIN_FACTOR", "MAX_FACTOR", "select", "scale", "combine", "accept_factor", "reject_factor",
-           "initial_step", "probe_step", "crossed", "secant_point", "illinois_update", "closest_end",
-           "bracket_closed"]
+           "initial_step", "probe_step", "step_floor", "fixed_steps", "crossed", "secant_point", "illinois_update",
+           "closest_end", "bracket_closed"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 # Added under the square root of DOP853's combination so that S5 = S3 = 0 gives 0, not 0/0 (it changes
@@ -79,7 +81,27 @@ def initial_step(d0, d1, d2, h0, order):
     """
     big = np.maximum(d1, d2)
     h1 = select(big <= 1e-15, np.maximum(1e-6, h0 * 1e-3), (0.01 / np.maximum(big, 1e-300)) ** (1.0 / (order + 1)))
-    return np.minimum(100.0 * h0, h1)
+    h = np.minimum(100.0 * h0, h1)
+    # NaN when a norm overflowed (a field far beyond atol + rtol |y|): 0, which the step-size floor fails at
+    # once (no step would pass the error test), where a NaN step would be rejected forever
+    return select(h > 0.0, h, 0.0)
+
+
+def step_floor(t0, t1):
+    """Ten ulps of the largest ``|t|`` of the span: a step below it no longer moves ``t`` by its size somewhere
+    in the span (a fixed step below it fails at once, an adaptive one is tested against its own ``t``)."""
+    big = max(abs(t0), abs(t1))
+    return 10.0 * (np.nextafter(big, np.inf) - big)
+
+
+def fixed_steps(span, h, cap):
+    """Steps of a fixed-step run over ``span = |t1 - t0|``: ``ceil(span / h)``, at least 1 (the grid
+    ``t0 + i h``, the last step shortened to land on t1), or ``cap`` when that is fewer — ``span / h`` may
+    exceed any integer, and a run never takes more than max_steps (``cap`` = max_steps + 1)."""
+    ratio = span / h
+    if not ratio < cap:
+        return cap
+    return max(1, int(math.ceil(ratio - 1e-9)))
 
 
 def probe_step(d0, d1):

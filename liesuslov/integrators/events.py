@@ -1,8 +1,9 @@
 """Events: surfaces ``event(t, Omega, Gamma, g) = 0`` crossed by a trajectory, located on its continuous extension.
 
 scipy's conventions: an event is a callable with optional attributes ``terminal`` (bool: stop the
-trajectory at its first crossing) and ``direction`` (+1: only crossings where the value goes up, -1:
-down, 0: both). It is called with the batch axes leading — ``t`` a float (one trajectory) or an array of
+trajectory at its first crossing; or an int N >= 0: stop it at its N-th crossing, 0 never) and
+``direction`` (+1: only crossings where the value goes up, -1: down, 0: both, along the integration). It is
+called with the batch axes leading — ``t`` a float (one trajectory) or an array of
 the batch shape (...) (each trajectory's own time), ``Omega`` (..., n, n) (coordinates (..., d) on
 algebras other than so(n)), ``Gamma`` (..., n) or None, ``g`` (..., m, m) or None — and returns one value
 per trajectory, (...): it may use per-trajectory parameters of the batch's shape (the trajectories not
@@ -32,6 +33,9 @@ __all__ = ["EventRecord", "LinearEvent", "coordinate_plane", "gamma_crossing", "
 @dataclass
 class EventRecord:
     """The crossings of one event function, for all trajectories, sorted by (index, t).
+
+    Within a trajectory the crossings come in the order the integration met them: ``t`` increasing, or
+    decreasing when integrating backward (``t_span[1] < t_span[0]``), as scipy's ``t_events``.
 
     Attributes
     ----------
@@ -71,20 +75,42 @@ class EventRecord:
         return f"EventRecord({len(self)} crossings of {len(np.unique(self.index))} trajectories)"
 
 
-def event_flags(event) -> tuple[bool, int]:
-    """``(terminal, direction)`` of an event callable (scipy's attributes; defaults False and 0).
+def terminal_count(terminal, name: str = "event.terminal") -> int:
+    """The crossing at which an event stops its trajectory: ``True`` 1, ``False`` 0 (never), an int N >= 0
+    the N-th (scipy's ``terminal``).
 
     Raises
     ------
     TypeError
-        If ``event`` is not callable.
+        If ``terminal`` is neither a bool nor an integer.
     ValueError
-        If ``direction`` is not -1, 0 or +1.
+        If it is a negative integer.
+    """
+    if isinstance(terminal, (bool, np.bool_)):
+        return int(terminal)
+    if not isinstance(terminal, (int, np.integer)):
+        raise TypeError(f"{name} must be a bool or an int >= 0 (stop at that crossing), got "
+                        f"{type(terminal).__name__} {terminal!r}")
+    if terminal < 0:
+        raise ValueError(f"{name} must be a bool or an int >= 0 (stop at that crossing), got {terminal}")
+    return int(terminal)
+
+
+def event_flags(event) -> tuple[int, int]:
+    """``(terminal, direction)`` of an event callable (scipy's attributes; defaults False and 0), the first as
+    :func:`terminal_count` (0: not terminal, N: stop at the N-th crossing).
+
+    Raises
+    ------
+    TypeError
+        If ``event`` is not callable, or its ``terminal`` neither a bool nor an int.
+    ValueError
+        If ``direction`` is not -1, 0 or +1, or ``terminal`` a negative int.
     """
     if not callable(event):
         raise TypeError(f"events must be callables event(t, Omega, Gamma, g) (or a list of them), got "
                         f"{type(event).__name__}")
-    terminal = bool(getattr(event, "terminal", False))
+    terminal = terminal_count(getattr(event, "terminal", False))
     direction = getattr(event, "direction", 0)
     try:
         direction = float(direction)
@@ -107,8 +133,8 @@ class LinearEvent:
     g : array_like, shape (..., m, m), optional
         Coefficients ``c`` on the attitude's entries.
     offset : float or array_like, shape (...)
-    terminal : bool
-        Stop the trajectory at its first crossing.
+    terminal : bool or int
+        Stop the trajectory at its first crossing (True), or at its N-th (an int N >= 0; 0 never).
     direction : {-1, 0, 1}
         Only crossings where the value goes down (-1), up (+1), or both (0).
 
@@ -120,7 +146,7 @@ class LinearEvent:
     the coefficients instead of calling it.
     """
 
-    def __init__(self, omega=None, Gamma=None, g=None, offset=0.0, *, terminal: bool = False,
+    def __init__(self, omega=None, Gamma=None, g=None, offset=0.0, *, terminal: bool | int = False,
                  direction: int = 0) -> None:
         if omega is None and Gamma is None and g is None:
             raise ValueError("LinearEvent needs at least one of omega=, Gamma=, g= (its coefficients)")
@@ -128,7 +154,8 @@ class LinearEvent:
         self.Gamma = None if Gamma is None else _real(Gamma, "Gamma")
         self.g = None if g is None else _real(g, "g")
         self.offset = _real(offset, "offset")
-        self.terminal = bool(terminal)
+        count = terminal_count(terminal, "terminal")
+        self.terminal = bool(count) if isinstance(terminal, (bool, np.bool_)) else count
         self.direction = direction
         event_flags(self)
 
@@ -166,7 +193,7 @@ def _real(x, name: str) -> np.ndarray:
     return arr
 
 
-def coordinate_plane(variable: str, index: int, value: float = 0.0, *, dim: int, terminal: bool = False,
+def coordinate_plane(variable: str, index: int, value: float = 0.0, *, dim: int, terminal: bool | int = False,
                      direction: int = 0) -> LinearEvent:
     """The plane ``omega[index] = value`` or ``Gamma[index] = value``.
 
@@ -188,12 +215,12 @@ def coordinate_plane(variable: str, index: int, value: float = 0.0, *, dim: int,
     return LinearEvent(**{variable: coef}, offset=value, terminal=terminal, direction=direction)
 
 
-def gamma_crossing(n: int, index: int = -1, *, terminal: bool = False, direction: int = 0) -> LinearEvent:
+def gamma_crossing(n: int, index: int = -1, *, terminal: bool | int = False, direction: int = 0) -> LinearEvent:
     """``Gamma[index] = 0`` (default the last component, Gamma_n: the Klebsh–Tisserand section)."""
     return coordinate_plane("Gamma", index, 0.0, dim=n, terminal=terminal, direction=direction)
 
 
-def return_plane(system, Omega0, Gamma0=None, *, terminal: bool = False, direction: int = 1) -> LinearEvent:
+def return_plane(system, Omega0, Gamma0=None, *, terminal: bool | int = False, direction: int = 1) -> LinearEvent:
     """The plane through each initial reduced state, normal to the reduced velocity there.
 
     ``<v0, (omega, Gamma) - (omega0, Gamma0)> = 0`` with ``v0 = (d omega / dt, d Gamma / dt)`` at t0: the

@@ -14,7 +14,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._validation import as_float_array, check_positive, check_rotations, check_t_eval, check_t_span, unit_vectors
+from .._validation import (
+    as_float_array,
+    check_positive,
+    check_rigid_motions,
+    check_rotations,
+    check_t_eval,
+    check_t_span,
+    unit_vectors,
+)
 from ..algebra.elements import body_vector, omega_coordinates
 from ..mechanics.protocol import ModelProtocol
 from ..mechanics.system import SuslovSystem
@@ -50,6 +58,8 @@ METHODS: dict[str, Method] = {
 }
 
 BACKENDS = ("auto", "numpy", "numba")
+#: max_steps above this is this (the compiled loop counts in int64; no run gets near it).
+_MAX_STEPS = 2**62
 
 
 def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool = False,
@@ -76,7 +86,8 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     Gamma0 : array_like, shape (..., n), optional
         Initial vertical in the body frame (unit vectors). Required when the potential is not zero.
     g0 : array_like, shape (..., m, m), optional
-        Initial attitude (default the identity); only with ``reconstruct=True``.
+        Initial attitude (default the identity); only with ``reconstruct=True``. Checked to be in SO(n) on
+        so(n) and in SE(n) on se(n) (``[[R, p], [0, 1]]``, R in SO(n)); taken as given on other algebras.
     reconstruct : bool
         Also integrate ``g^{-1} dg/dt = Omega`` on the group.
     method : str
@@ -167,7 +178,7 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     model, x0, G0, g_init, batch_shape = _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form)
     plan = plan_for(meth.tableau)
     problem = _problem(model, plan, chart, x0, G0, g_init, batch_shape, t0, t1, meth.adaptive, step0, rtol, atol,
-                       int(max_steps), te, events, bool(reproject))
+                       min(int(max_steps), _MAX_STEPS), te, events, bool(reproject))
     if te is None and batch_shape != ():  # a batch (also of one) reports the two ends; one trajectory every step
         problem.t_eval = np.array([t0, t1])
     solver, used, reason = _choose_solver(problem, backend)
@@ -220,6 +231,8 @@ def _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form):
             g_init = as_float_array(g0, "g0", ndim_min=2, tail=(m, m))
             if alg.name.startswith("so("):
                 check_rotations(g_init, "g0")
+            elif alg.name.startswith("se("):
+                check_rigid_motions(g_init, "g0")
         shapes.append(g_init.shape[:-2])
     elif g0 is not None:
         raise ValueError("g0 was given but reconstruct=False; pass reconstruct=True to integrate g")

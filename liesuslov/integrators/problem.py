@@ -35,6 +35,8 @@ FAILURES = {
     2: "step size underflow (the solution is probably singular there, or the tolerances are below rounding)",
     3: "max_steps reached",
     4: "step beyond the chart's domain (|h Omega| too large for the exponential: lower h)",
+    5: "the fixed step h is below ten ulps of t within t_span (t0 + i h cannot be represented: raise h, or move "
+       "t_span nearer 0)",
 }
 
 #: Products ``g <- g phi(Theta)`` add ~1e-16 per step to |g^T g - I|; with ``reproject`` a Newton–Schulz step
@@ -83,7 +85,8 @@ class Problem:
         The user's event functions (numpy solver).
     event_linear : list over events of ``(coef (B, k + q), offset (B,))`` or None
         The linear form of each :class:`~.events.LinearEvent` (None for any other callable).
-    event_terminal : (E,) int64 (0/1)
+    event_terminal : (E,) int64
+        The crossing at which each event stops its trajectory (0 never, 1 the first, N the N-th).
     event_direction : (E,) int64 (-1, 0, +1)
     reproject : bool
         Re-orthonormalise g (or renormalise Gamma) every ``max(RENORM_EVERY, m)`` accepted steps.

@@ -178,9 +178,10 @@ class RKMKStepper:
             acc = term if acc is None else acc + term
         return np.zeros_like(Z[0]) if acc is None else acc
 
-    def _stage(self, step: Step, i: int) -> np.ndarray:
+    def _stage(self, step: Step, i: int, vertical: np.ndarray | None = None) -> np.ndarray:
         """Evaluate stage i >= 1 from the rows above it; returns its argument (k + q, B) and, for the
-        exponential, clears ``step.ok`` where the chart argument is out of the domain."""
+        exponential, clears ``step.ok`` where the chart argument is out of the domain. ``vertical`` (B, n), if
+        given, is the body vertical the field reads (else ``phi(-Theta_i) Gamma``)."""
         k, kern, ctx = self.k, self.kern, step.ctx
         z = self._sum(step, self._A[i], base=True)
         B = z.shape[1]
@@ -190,7 +191,9 @@ class RKMKStepper:
             row[:k] = self._eval(X, None).T
             return z
         t = kern.load(ctx, z[k:])
-        row[:k] = self._eval(X, kern.act(ctx, t) if self._has_gamma else None).T
+        if vertical is None and self._has_gamma:
+            vertical = kern.act(ctx, t)
+        row[:k] = self._eval(X, vertical).T
         kern.dinv(ctx, t, kern.omega(ctx, z[:k], X), row[k:])
         self._check_domain(step, t)
         return z
@@ -280,9 +283,15 @@ class RKMKStepper:
 
     # ------------------------------------------------------------------ the continuous extension
     def complete(self, step: Step) -> None:
-        """Evaluate the stages the continuous extension needs that the trial step did not (after acceptance)."""
+        """Evaluate the stages the continuous extension needs that the trial step did not (after acceptance).
+
+        Stage s, the field at the new point, reads the vertical of the step's end state (``g1^T gamma`` in
+        mode g), as the next step's stage 0 would: the next step reuses it (the new-point rule), and a
+        vertical carried by the chart (``phi(-Theta) g^T gamma``) would differ in the last bits — asking for
+        output times would change the trajectory."""
+        s = self.plan.s
         for i in range(step.done, self.plan.S):
-            self._stage(step, i)
+            self._stage(step, i, self.vertical(step.G1, step.gamma) if i == s and self._has_gamma else None)
         step.done = self.plan.S
 
     def dense(self, step: Step, theta: np.ndarray, rows: np.ndarray):

@@ -23,8 +23,6 @@ ended; then the arrays are compressed to the running ones.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from . import control
@@ -69,7 +67,7 @@ class _Output:
         """Rows ``(i[r], traj[r])`` of the output get ``xi[r]``, ``G[r]`` (flattened)."""
         self.xi[i, traj] = xi
         if G is not None:
-            self.G[i, traj] = G.reshape(G.shape[0], -1)
+            self.G[i, traj] = G.reshape(G.shape[0], self.P.q)
 
     def record(self, t: float, xi: np.ndarray, G: np.ndarray | None) -> None:
         """Every step (one trajectory): the state (1, k) and group part after an accepted step."""
@@ -99,6 +97,7 @@ class _Events:
         self.P = P
         self.E = P.n_events
         self.found = [[] for _ in range(self.E)]  # per event: (trajectory, t, xi (k,), G (q,))
+        self.count = np.zeros((P.B, self.E), dtype=np.int64)  # crossings so far, per trajectory and event
         if any(lin is None for lin in P.event_linear):
             # a user callable sees the whole batch: each trajectory at its last accepted point, but those asked about
             self.last_t, self.last_xi, self.last_G = np.full(P.B, P.t0), P.xi0.copy(), P.G0.copy()
@@ -139,9 +138,12 @@ class _Events:
         """(R, E) bool: the events the step crossed (:func:`.control.crossed`)."""
         return control.crossed(old, new, self.P.event_direction[None, :])
 
-    def record(self, e: int, traj: int, t: float, xi: np.ndarray, G: np.ndarray | None) -> None:
+    def record(self, e: int, traj: int, t: float, xi: np.ndarray, G: np.ndarray | None) -> bool:
+        """Keep a crossing; True when it is the one at which the event stops the trajectory."""
         g = np.zeros(0) if G is None else np.reshape(G, -1).copy()
         self.found[e].append((traj, t, np.reshape(xi, -1).copy(), g))
+        self.count[traj, e] += 1
+        return bool(self.count[traj, e] == self.P.event_terminal[e])
 
     def arrays(self, k: int, q: int):
         """Per event: ``(index, t, xi, G)`` sorted by trajectory, then time (the order found within one)."""
@@ -183,8 +185,8 @@ class _Solve:
         self.ncomp = P.k + P.q
         self.n_fixed = 0
         self.tries = 0  # trial steps so far: no trajectory has made more (it makes at most one per loop)
-        # 10 ulps of the largest |t| of the span: a step above it is above 10 ulps of any t (the underflow test)
-        self.h_floor = 10 * abs(math.nextafter(max(abs(P.t0), abs(P.t1)), math.inf) - max(abs(P.t0), abs(P.t1)))
+        # a step above it is above 10 ulps of any t of the span (the underflow test)
+        self.h_floor = float(control.step_floor(P.t0, P.t1))
         # the rows
         self.idx = np.arange(B)
         self.t = np.full(B, P.t0)
@@ -256,23 +258,24 @@ class _Solve:
         self.first = st.field(self.xi, self.G, self.gamma)
         self.have_first[:] = True
         self.nfev += 1
+        # the initial state is reported even where the field fails there (NaN only after the failure time)
+        if self.out.rec_all:
+            self.out.record(P.t0, self.xi, self.G)
+        elif P.t_eval[0] == P.t0:
+            self.out.write(np.zeros(P.B, np.int64), self.idx, self.xi, self.G)
+            self.next_out[:] = 1
         finite = np.all(np.isfinite(self.first), axis=1) & np.all(np.isfinite(self.xi), axis=1)
         self._fail(~finite, 1, self.t)
         live = np.flatnonzero(self.live)
-        if self.out.rec_all:
-            if live.size:
-                self.out.record(P.t0, self.xi, self.G)
-        elif P.t_eval[0] == P.t0:
-            self.out.write(np.zeros(live.size, np.int64), self.idx[live], self.xi[live],
-                           None if self.G is None else self.G[live])
-            self.next_out[:] = 1
         if self.ev.E:
             self.ev_old[live] = self.ev.values(self.t[live], self.xi[live], self._rows(self.G, live), self.idx[live],
                                                 accepted=True)
         if not P.adaptive:
             self.h_abs[:] = P.h
+            if not P.h >= self.h_floor:  # below the resolution of t: the grid would not be t0 + i h
+                self._fail(self.live.copy(), 5, self.t)
             # fixed step: the grid t0 + i h (no accumulated sums), the last step shortened to land on t1
-            self.n_fixed = max(1, math.ceil(abs(P.t1 - P.t0) / P.h - 1e-9))
+            self.n_fixed = control.fixed_steps(abs(P.t1 - P.t0), P.h, P.max_steps + 1)
         elif P.h > 0:
             self.h_abs[:] = P.h
         elif live.size:
@@ -529,7 +532,6 @@ class _Solve:
             if stop[j] < theta[i]:  # past this trajectory's terminal crossing
                 continue
             tc = t_new[j] if theta[i] == 1.0 else t[j] + theta[i] * h[j]
-            ev.record(int(e[i]), int(traj[j]), tc, xs[i], None if Gs is None else Gs[i])
-            if P.event_terminal[e[i]] and np.isnan(stop[j]):
+            if ev.record(int(e[i]), int(traj[j]), tc, xs[i], None if Gs is None else Gs[i]) and np.isnan(stop[j]):
                 stop[j] = theta[i]
         return np.where(stop == 1.0, t_new, t + stop * h)

@@ -453,8 +453,9 @@ def _lowrank_dinv(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs)
 
 # ====================================================================================== phi(sign Th) v
 # The so3 operations below are straight-line code on scalars (no matrix, no scratch, no loop in one branch
-# only); their arrays come borrowed from the family dispatch, so the reference counting numba keeps around
-# the call of _so3_coef is not atomic.
+# only), on arrays borrowed from the family dispatch (numba counts no references to them). _so3_rotate runs in
+# every stage and is inlined there at numba IR level; _so3_update runs once a step and stays a call (inlined,
+# ~5% of an so(3) step for ~8 s more compile: kernel/__init__.py).
 @_jit_inline
 def _so3_rotate(chart, Th, sign, v, out):
     """out = phi(sign hat(Th)) v = c v + sign a Th × v + b (Th·v) Th."""

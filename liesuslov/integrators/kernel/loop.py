@@ -49,6 +49,7 @@ from .common import (
     _closest_end,
     _combine,
     _crossed,
+    _fixed_steps,
     _illinois_update,
     _initial_step,
     _jit,
@@ -57,6 +58,7 @@ from .common import (
     _reject_factor,
     _scale,
     _secant_point,
+    _step_floor,
     _view,
 )
 from .group import _alg_act, _alg_dinv, _alg_sq, _alg_state, _alg_update, _field, _field_call, _omega_alg
@@ -331,7 +333,7 @@ def _locate(family, kind, chart, skew, mode, bi, n_act, act_e, act_th, gold, gne
             for c in range(q):
                 ev_G[bi, e, cnt, c] = Gt[c]
         ev_count[bi, e] = cnt + 1
-        if ev_term[e] != 0 and not terminal:
+        if cnt + 1 == ev_term[e] and not terminal:  # its N-th crossing (ev_term 0: never)
             terminal = True
             t_stop = te
             stop_th = th_
@@ -572,36 +574,34 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
         _field_call(xi, Gam0, has_g, fidx, fval, z, F, i0)
         nfev += 1
         f0_ok = True
+        # the initial state is reported even when the field fails there (NaN only after the failure time)
+        while ie < NT and t_eval[ie] == t0:
+            for c in range(k):
+                xi_out[ie, bi, c] = xi[c]
+            for c in range(q):
+                G_out[ie, bi, c] = G[c]
+            ie += 1
+        if record:
+            # rec_n (0 here), not a literal 0: numba would compile _record a second time for it
+            t_rec, xi_rec, G_rec = _record(t_rec, xi_rec, G_rec, rec_n, t0, xi, G)
+            rec_n = 1
         if not (_finite(F[0]) and _finite(xi) and _finite(G)):
             fail = 1
-        else:
-            while ie < NT and t_eval[ie] == t0:
-                for c in range(k):
-                    xi_out[ie, bi, c] = xi[c]
-                for c in range(q):
-                    G_out[ie, bi, c] = G[c]
-                ie += 1
-            if record:
-                # rec_n (0 here), not a literal 0: numba would compile _record a second time for it
-                t_rec, xi_rec, G_rec = _record(t_rec, xi_rec, G_rec, rec_n, t0, xi, G)
-                rec_n = 1
         _event_values(bi, ev_coef, ev_off, xi, G, gold)
         h = hfix * direction
         if fail == 0 and adaptive and hfix == 0.0:
             h = _first_step(family, kind, skew, mode, has_g, order, direction, rtol, atol, xi, G, gam, F, xit, Gt, Gam,
                             z, fidx, fval, widx, wval, Om, Q, cvec, Oa, Eg, r, bufs, PQ, PQ2, sc_y, f_y)
-            nfev += 1
-            if not (h == h):
-                fail = 1
+            nfev += 1  # (a step of 0, when the norms overflowed: the step-size floor below fails the run here)
 
         # ---------------------------------------------------------------- the time loop
         after_reject = False
         nc = i1
-        if not adaptive and hfix <= 0.0:
-            fail = 2
+        if not adaptive and not hfix >= _step_floor(t0, t1):  # below the resolution of t: the grid is not t0 + i h
+            fail = 5
         n_fixed = 0
         if not adaptive and fail == 0:
-            n_fixed = max(1, int(math.ceil(abs(t1 - t0) / hfix - 1e-9)))
+            n_fixed = _fixed_steps(abs(t1 - t0), hfix, max_steps + 1)
         t_fail = t0
         while fail == 0 and t1 != t0:
             if nsteps + nrej >= max_steps:
@@ -660,7 +660,12 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                         if exp_domain and not extended and _alg_sq(family, kind, Th) >= _PI2:
                             ok = False
                         if has_g:
-                            _alg_act(family, kind, chart, skew, Th, -1.0, Gam0, Gam, W, vb, Q, nc, r, bufs)
+                            if extended and i == s:
+                                # the field at the new point, reused as the next stage 0: it reads the end
+                                # state's vertical (g1^T gamma), as that stage 0 would (bitwise), not the chart's
+                                _body_vertical(mode, G1, gam, Gam)
+                            else:
+                                _alg_act(family, kind, chart, skew, Th, -1.0, Gam0, Gam, W, vb, Q, nc, r, bufs)
                     _field(Xi, Gam, has_g, fidx, fval, z, F, i)
                     nfev += 1
                     for c in range(k):

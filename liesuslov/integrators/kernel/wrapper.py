@@ -31,7 +31,6 @@ from .common import (
     MODES,
 )
 from .loop import _solve_one
-from .warm import COMPILE_HERE_ENV, FAMILY_KIND, compile_kinds
 
 
 # ====================================================================================== choosing the kind
@@ -206,6 +205,9 @@ def _compile_apart(family: int, sig: tuple) -> None:
     reports the effect), and the compiler's Python objects stay in the child. A child that fails (no writable cache, no
     subprocess) leaves the compilation to this process, as before.
     """
+    # (imported here: `python -m liesuslov.integrators.kernel.warm` must not find warm imported by the package)
+    from .warm import COMPILE_HERE_ENV, FAMILY_KIND, compile_kinds
+
     if os.environ.get(COMPILE_HERE_ENV) == "1":
         return
     if _solve_one._cache.load_overload(sig, _solve_one.targetctx) is not None:
