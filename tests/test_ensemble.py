@@ -580,3 +580,78 @@ def test_the_docs_examples_run(tmp_path):
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.strip().endswith("ok")
     assert ls.open_ensemble(tmp_path / "runs" / "torus").success
+
+
+# ---------------------------------------------------------------------------- the run's message, unusable executors
+def _V_half(G):
+    return 0.5 * np.sum(G * G, axis=-1)
+
+
+def _dV_nan_at_0123(G):
+    """The gradient of _V_half, NaN for a vertical with Gamma_1 = 0.123 (one trajectory fails at t = 0)."""
+    out = np.array(G, dtype=float)
+    out[np.abs(out[..., 0] - 0.123) < 1e-12] = np.nan
+    return out
+
+
+def test_the_message_is_the_whole_runs(tmp_path):
+    """It was the first collected chunk's ('successfully reached the end' with trajectory 17 failed; with a
+    store the same text went into the manifest); now what one integrate call on the whole batch says."""
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])),
+                             potential=ls.Potential(_V_half, _dV_nan_at_0123))
+    rng = np.random.default_rng(0)
+    Omega0 = rng.normal(size=(40, 2)) @ system.constraints.basis
+    Gamma0 = rng.normal(size=(40, 3))
+    Gamma0 /= np.linalg.norm(Gamma0, axis=1, keepdims=True)
+    Gamma0[17] = [0.123, 0.0, np.sqrt(1.0 - 0.123 ** 2)]
+    kw = dict(Gamma0=Gamma0, method="rkmk45", t_eval=[0.0, 1.0])
+    sol = ls.integrate(system, Omega0, (0.0, 1.0), **kw)
+    assert sol.message.startswith("1 of 40 trajectories failed; the first (index 17): non-finite state at t = 0")
+    assert sol.stats["failure"][17] == 1 and np.count_nonzero(sol.stats["failure"]) == 1
+    ens = ensemble(system, Omega0, (0.0, 1.0), chunk_size=4, **kw)
+    stored = ensemble(system, Omega0, (0.0, 1.0), chunk_size=4, store=tmp_path / "s", **kw)
+    for e in (ens, stored, open_ensemble(tmp_path / "s")):
+        assert e.message == sol.message
+        assert np.array_equal(e.stats["failure"], sol.stats["failure"])
+
+
+def test_an_executor_that_cannot_run_is_bad_input():
+    """A shut-down pool was accepted: every chunk failed after the retries, and a store was marked complete."""
+    system, Omega0, Gamma0 = _initial()
+    pool = ProcessPoolExecutor(1)
+    pool.shutdown()
+    with pytest.raises(ValueError, match="executor: this ProcessPoolExecutor is shut down"):
+        ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, executor=pool, **FIXED)
+
+
+@pytest.mark.slow
+def test_dask_client_closed_or_without_workers(monkeypatch):
+    """A closed client is bad input; a client closed mid-run fails the remaining chunks (it raised the client's
+    ClosedClientError from the clean-up); a cluster scaled to no worker waits for one and warns once."""
+    distributed = pytest.importorskip("distributed")
+    import threading
+
+    from liesuslov.ensembles import executors
+
+    system, Omega0, Gamma0 = _initial((40,))
+    slow = {"method": "rkmk4", "h": 1e-4, "backend": "numpy"}
+    cluster = distributed.LocalCluster(n_workers=1, processes=True, threads_per_worker=1, dashboard_address=None,
+                                       host="127.0.0.1")
+    try:
+        c = distributed.Client(cluster)
+        threading.Timer(2.0, c.close).start()
+        ens = ensemble(system, Omega0, (0.0, 2.0), Gamma0=Gamma0, chunk_size=4, executor=c, **slow)
+        assert not ens.success and "chunks failed" in ens.message and "Closed" in ens.message
+        with pytest.raises(ValueError, match="executor: this dask.distributed.Client is closed"):
+            ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, executor=c, **FIXED)
+        monkeypatch.setattr(executors, "NO_WORKER_WARNING", 2.0)
+        monkeypatch.setattr(executors, "_POLL", 0.5)
+        c = distributed.Client(cluster)
+        threading.Timer(1.0, lambda: cluster.scale(0)).start()
+        threading.Timer(8.0, lambda: cluster.scale(1)).start()
+        with pytest.warns(RuntimeWarning, match="no worker for 2 s"):
+            ens = ensemble(system, Omega0, (0.0, 2.0), Gamma0=Gamma0, chunk_size=4, executor=c, **slow)
+        assert ens.success
+        c.close()
+    finally:
+        cluster.close()

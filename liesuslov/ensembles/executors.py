@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import os
+import time
+import warnings
 
 from .tasks import _run_chunk, _Task
 
@@ -60,11 +62,57 @@ def _submit(executor, task: _Task, attempt: int):
     return executor.submit(_run_chunk, task)
 
 
+#: Seconds a Dask cluster may have no worker before :func:`_wait_first` warns (once) that the run is waiting.
+NO_WORKER_WARNING = 60.0
+#: Seconds between the checks of a Dask wait (for workers, and for Ctrl-C).
+_POLL = 5.0
+
+
 def _wait_first(executor, futures):
+    """The futures that are done, waiting for at least one.
+
+    A Dask cluster without workers holds its tasks until one joins — an adaptive cluster or a batch queue may
+    take minutes to start them, so the wait does not give up; after :data:`NO_WORKER_WARNING` seconds with no
+    worker it warns once, saying what it waits for (interrupt, or add workers)."""
     if executor is None:
         return list(futures)
     if _is_dask(executor):
         from distributed import wait
 
-        return list(wait(list(futures), return_when="FIRST_COMPLETED").done)
+        idle_since, warned = None, False
+        while True:
+            try:
+                return list(wait(list(futures), timeout=_POLL, return_when="FIRST_COMPLETED").done)
+            except TimeoutError:
+                pass
+            if _n_dask_workers(executor) > 0:
+                idle_since = None
+                continue
+            idle_since = idle_since or time.monotonic()
+            if not warned and time.monotonic() - idle_since >= NO_WORKER_WARNING:
+                warnings.warn(f"ensemble: the Dask cluster has had no worker for {NO_WORKER_WARNING:.0f} s; its "
+                              f"{len(futures)} pending chunks wait for one (start workers, or interrupt: the store "
+                              "keeps the finished chunks)", RuntimeWarning, stacklevel=4)
+                warned = True
     return list(cf.wait(list(futures), return_when=cf.FIRST_COMPLETED).done)
+
+
+def _n_dask_workers(client) -> int:
+    try:
+        return len(client.scheduler_info()["workers"])
+    except Exception:  # noqa: BLE001 - a closed client: the wait itself reports it
+        return 1
+
+
+def _check_running(executor) -> None:
+    """Raise ``ValueError`` naming ``executor`` when it can no longer run tasks (shut down, closed, broken)."""
+    if executor is None:
+        return
+    if _is_dask(executor):
+        if getattr(executor, "status", "running") in ("closing", "closed"):
+            raise ValueError(f"executor: this dask.distributed.Client is {executor.status}; pass a running client")
+        return
+    if getattr(executor, "_shutdown_thread", False) or getattr(executor, "_shutdown", False) or \
+            getattr(executor, "_broken", False):
+        raise ValueError(f"executor: this {type(executor).__name__} is shut down or broken and cannot run tasks; "
+                         "pass a running executor")

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import check_t_eval, check_t_span
+from ..integrators.problem import run_message
 from .checks import _nonneg_int, _positive_int
 from .constants import (
     _ARRAYS,
@@ -26,7 +27,7 @@ from .constants import (
     REDUCTIONS,
     SAMPLER_BLOCK,
 )
-from .executors import _n_workers, _pickles, _submit, _wait_first
+from .executors import _check_running, _n_workers, _pickles, _submit, _wait_first
 from .result import Ensemble
 from .sampling import _seed_parts
 from .store import _merge_stats, _write_manifest, _write_shard, open_ensemble
@@ -127,6 +128,7 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     if executor is not None and not callable(getattr(executor, "submit", None)):
         raise TypeError(f"executor must be None, a concurrent.futures.Executor or a dask.distributed.Client "
                         f"(something with submit), got {type(executor).__name__}")
+    _check_running(executor)
     if reduce is not None and not callable(reduce) and reduce not in REDUCTIONS:
         raise ValueError(f"reduce must be None, one of {list(REDUCTIONS)} or a module-level callable "
                          f"reduce(sol) -> Solution, got {reduce!r}")
@@ -220,8 +222,12 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     stats.update(run_stats)
     stats.update({"failed_chunks": collected["failed"], "retries": collected["retries"], "wall_time": wall})
     meta = collected["meta"] or {}
-    message = (f"{len(collected['failed'])} of {len(bounds)} chunks failed (status -1): "
-               f"{collected['failed'][0]['error']}" if collected["failed"] else meta.get("message", ""))
+    if collected["failed"]:
+        message = (f"{len(collected['failed'])} of {len(bounds)} chunks failed (status -1): "
+                   f"{collected['failed'][0]['error']}")
+    else:  # the whole batch's, as one integrate call would say it (not one chunk's)
+        ends = collected.get("ends") or collected["traj_stats"]
+        message = run_message(collected["status"], ends.get("t_stop", np.full(B, np.nan)), ends.get("failure"))
     t_out = collected["t"] if collected["t"] is not None else (t_eval[-1:] if reduce == "final" else t_eval)
     tails = collected["tails"] if collected["tails"] is not None else _fallback_tails(system, init, sampler, options)
     ev = options.get("events")
@@ -252,13 +258,20 @@ def _run_all(executor, make_task, bounds, retries, max_in_flight, collected, roo
     attempts: dict[int, int] = {}
     pending: dict[Any, int] = {}
 
+    submitted = [False]
+
     def submit(i: int) -> None:
         try:
             pending[_submit(executor, make_task(i), attempts.get(i, 0))] = i
         except _USER_ERRORS:
             raise
         except Exception as exc:  # noqa: BLE001 - a broken pool refuses submissions: count as a failed attempt
+            if not submitted[0]:  # refused from the start: the executor itself is unusable (bad input)
+                raise ValueError(f"executor: {type(executor).__name__} refused the first chunk "
+                                 f"({type(exc).__name__}: {exc}); pass a running executor") from exc
             fail(i, exc)
+        else:
+            submitted[0] = True
 
     def fail(i: int, exc: BaseException | None, error: str | None = None) -> None:
         attempts[i] = attempts.get(i, 0) + 1
@@ -278,7 +291,16 @@ def _run_all(executor, make_task, bounds, retries, max_in_flight, collected, roo
                 submit(todo.pop())
             if not pending:
                 continue
-            for fut in _wait_first(executor, pending):
+            try:
+                done = _wait_first(executor, pending)
+            except _USER_ERRORS:
+                raise
+            except Exception as exc:  # noqa: BLE001 - the executor went away (a Dask client closed mid-run)
+                for fut, i in list(pending.items()):
+                    del pending[fut]
+                    fail(i, exc)
+                continue
+            for fut in done:
                 i = pending.pop(fut)
                 try:
                     payload = fut.result()
@@ -298,7 +320,10 @@ def _run_all(executor, make_task, bounds, retries, max_in_flight, collected, roo
         for fut in pending:  # on an error raised here, leave nothing running on the executor
             cancel = getattr(fut, "cancel", None)
             if cancel is not None:
-                cancel()
+                try:
+                    cancel()
+                except Exception:  # noqa: BLE001 - a closed client cannot cancel: nothing runs there anyway
+                    pass
 
 
 def _collect(i: int, bound, payload: dict, collected: dict, root: Path | None) -> None:
@@ -322,6 +347,8 @@ def _collect(i: int, bound, payload: dict, collected: dict, root: Path | None) -
                                                  np.full(B, np.nan if v.dtype.kind == "f" else 0, dtype=v.dtype))
             if root is None:
                 collected["traj_stats"][name][a:b] = v
+            elif name in ("t_stop", "failure"):  # for the run's message (16 bytes a trajectory, as status)
+                collected.setdefault("ends", {}).setdefault(name, np.zeros(B, dtype=v.dtype))[a:b] = v
     if root is not None:
         _write_shard(root, i, payload)
         return
@@ -431,7 +458,7 @@ def _prepare_store(store, overwrite: bool) -> Path:
         if not overwrite:
             raise ValueError(f"store {str(root)!r} already holds an ensemble; pass overwrite=True to replace it, "
                              "or another directory")
-        for p in root.glob("chunk-*.npz"):
+        for p in [*root.glob("chunk-*.npz"), *root.glob(".chunk-*.npz")]:  # (the latter: shards cut off mid-write)
             p.unlink()
         (root / MANIFEST).unlink()
     root.mkdir(parents=True, exist_ok=True)

@@ -29,7 +29,7 @@ from ..mechanics.system import SuslovSystem
 from .charts import CHARTS
 from .events import EventRecord, LinearEvent, event_flags
 from .plan import plan_for
-from .problem import FAILURES, STATUS_TERMINAL, Problem, RawResult
+from .problem import STATUS_TERMINAL, Problem, RawResult, run_message
 from .solution import Solution
 
 __all__ = ["integrate", "METHODS", "Method", "BACKENDS"]
@@ -398,7 +398,8 @@ def _solution(raw: RawResult, P: Problem, batch_shape, method, chart, wall, reas
              "backend_reason": reason, "kernel": P.kind,
              "state_dim": P.k + P.q, "batch": P.B, "wall_time": wall,
              "trajectory_nfev": raw.nfev.reshape(batch_shape), "trajectory_steps": raw.steps.reshape(batch_shape),
-             "trajectory_rejected": raw.rejected.reshape(batch_shape), "t_stop": raw.t_stop.reshape(batch_shape)}
+             "trajectory_rejected": raw.rejected.reshape(batch_shape), "t_stop": raw.t_stop.reshape(batch_shape),
+             "failure": raw.failure.reshape(batch_shape)}
     records = []
     for e in range(P.n_events):
         idx = raw.event_index[e]
@@ -448,21 +449,7 @@ def _group_arrays(P: Problem, G: np.ndarray, lead: tuple, which):
 
 
 def _message(raw: RawResult) -> str:
-    if not np.count_nonzero(raw.status):  # (ndarray.any: ~3 µs on one entry)
-        return "The solver successfully reached the end of the integration interval."
-    failed = np.flatnonzero(raw.status < 0)
-    stopped = int(np.sum(raw.status == 1))
-    if failed.size:
-        b = int(failed[0])
-        what = FAILURES.get(int(raw.failure[b]), "failure")
-        head = "" if raw.status.size == 1 else (f"{failed.size} of {raw.status.size} trajectories failed; "
-                                               f"the first (index {b}): ")
-        what, _, hint = what.partition(" (")
-        return f"{head}{what} at t = {raw.t_stop[b]:.17g}" + (f" ({hint}" if hint else "")
-    if stopped:
-        return (f"A terminal event stopped {stopped} of {raw.status.size} trajectories; the others reached the end."
-                if raw.status.size > 1 else f"A terminal event stopped the trajectory at t = {raw.t_stop[0]:.17g}.")
-    return "The solver successfully reached the end of the integration interval."
+    return run_message(raw.status, raw.t_stop, raw.failure)
 
 
 class _Replay:

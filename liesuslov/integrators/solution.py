@@ -35,12 +35,14 @@ class Solution:
         The attitude (in the algebra's matrix representation), when reconstructed.
     stats : dict
         ``nfev``, ``steps`` (accepted), ``rejected`` summed over the trajectories, and per trajectory
-        ``trajectory_nfev``, ``trajectory_steps``, ``trajectory_rejected`` and ``t_stop`` (...); ``method``,
+        ``trajectory_nfev``, ``trajectory_steps``, ``trajectory_rejected``, ``t_stop`` and ``failure`` (...: 0, or
+        the code of why it failed, a key of :data:`~.problem.FAILURES`); ``method``,
         ``chart``, ``form``, ``backend`` (``"numba"`` or ``"numpy"``), ``backend_reason``, ``kernel``,
         ``state_dim``, ``batch``, ``wall_time``.
     status : ndarray of int, shape (...)
         Per trajectory: 0 reached the end of t_span, 1 stopped by a terminal event, -1 failed (the time is
-        ``stats["t_stop"]``, the reason in ``message``). Every output after a trajectory stopped is NaN.
+        ``stats["t_stop"]``, the reason in ``stats["failure"]`` and, for the first, in ``message``). Every output
+        after a trajectory stopped is NaN.
     message : str
     events : list of EventRecord
         One record per event function passed to ``integrate`` (empty without events).
