@@ -100,6 +100,8 @@ def check_real(x: Any, name: str) -> float:
             raise TypeError(f"{name} must be a real number, got the complex {x!r}")
         if isinstance(x, (str, bytes)):  # float("0.1") would read it
             raise TypeError(f"{name} must be a real number, got the string {x!r}")
+        if isinstance(x, (bool, np.bool_)):  # float(True) would read it as 1
+            raise TypeError(f"{name} must be a real number, got the boolean {x!r}")
         try:
             val = float(x)
         except (TypeError, ValueError) as exc:

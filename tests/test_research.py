@@ -557,3 +557,76 @@ def test_research_results_do_not_depend_on_batch_mates():
         for name in ("period", "monodromy", "angle", "closure", "return_distance", "geometric_phase"):
             assert np.array_equal(getattr(batch, name), np.array([getattr(a, name) for a in alone]), equal_nan=True), \
                 name
+
+
+# ------------------------------------------------------------------------------------------ edge cases (an audit)
+def test_near_equilibrium_periods_are_the_least_and_equilibria_are_named():
+    """Near a steady rotation the reduced speed is tiny: crossings before 1e-9 |s0| / speed were skipped as 'the
+    start', so w = (1e-10, 5e-11, 1) got 2T, (1e-12, ...) 143T, with status 0. Now the start is a rounding-level
+    time (1e-12 |s0| / speed) and a speed below 1e-12 |s0| is an equilibrium (named; per trajectory with
+    on_failure='nan')."""
+    J = np.array([1.0, 2.0, 3.0])
+    for eps in (1e-8, 1e-10, 1e-11):  # (the period to ~rtol |s0| / orbit size: 5e-6 relative at eps = 1e-8)
+        w = [eps, eps / 2, 1.0]
+        ph = ls.reconstruction_phase(free_body(J), coords3(w))
+        assert abs(ph.period - EulerTop(J, w).period) < 1e-4 * ph.period
+    with pytest.raises(ValueError, match="equilibrium of the reduced flow"):
+        ls.reconstruction_phase(free_body(J), coords3([1e-13, 5e-14, 1.0]))
+    ph = ls.reconstruction_phase(free_body(J), coords3([[0.3, 0.2, 1.0], [0.0, 0.0, 1.0]]), on_failure="nan")
+    assert ph.status.tolist() == [0, 1] and np.isfinite(ph.period[0]) and np.isnan(ph.period[1])
+    assert "equilibrium" in ph.message
+
+
+def test_a_small_quasi_periodic_orbit_is_not_a_period():
+    """The heavy top near its hanging equilibrium (two frequencies): its near-returns came within 1e-7 |s0|
+    (|s0| ~ 1 with Gamma) and were accepted ('periods' 6.7 and 26.8); a return must also close to 1e-5 of
+    the orbit's own size."""
+    heavy = ls.SuslovSystem(ls.Inertia.from_principal_moments([1.0, 2.0, 3.0]),
+                            constraints=ls.Subspace(SO3, np.eye(3)), potential=ls.LinearPotential([1.0, 0.7, 0.4]))
+    B = np.array([1.0, 0.7, 0.4])
+    for eps in (1e-5, 1e-9):
+        with pytest.raises(ValueError, match="did not return"):
+            ls.reconstruction_phase(heavy, eps * coords3([0.3, -0.5, 0.8]), Gamma0=-B / np.linalg.norm(B), t_max=200.0)
+
+
+def test_a_failure_is_reported_with_its_reason_and_time():
+    J = np.array([1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match=r"the first \(flat index 0\): max_steps reached at t = "):
+        ls.reconstruction_phase(free_body(J), coords3([0.3, 0.2, 1.0]), period=20.0, max_steps=30)
+
+
+def test_poincare_section_reports_failures_and_not_its_start():
+    J = np.array([1.0, 2.0, 3.0])
+    system = free_body(J)
+    X = coords3(np.random.default_rng(0).normal(size=(20, 3)))
+    # a return plane through each initial state: no crossing at t0 itself (4 of 20 had one at ~1e-17)
+    rec = ls.poincare_section(system, X, (0.0, 40.0), ls.research.return_plane(system, X, None))
+    assert rec.t.size > 0 and rec.t.min() > 1e-3 and rec.status.tolist() == [0] * 20
+    with pytest.warns(RuntimeWarning, match="max_steps reached"):
+        rec = ls.poincare_section(system, X[:3], (0.0, 20.0), plane(omega=[0.0, 1.0, 0.0]), max_steps=30)
+    assert -1 in rec.status.tolist() and "max_steps" in rec.message
+    with pytest.raises(TypeError, match="must return real numbers"):
+        ls.poincare_section(system, X[:2], (0.0, 5.0), lambda t, O, G, g: None)
+    with pytest.raises(ValueError, match="returned NaN"):
+        ls.poincare_section(system, X[:2], (0.0, 5.0), lambda t, O, G, g: np.full(np.shape(t), np.nan))
+    with pytest.raises(ValueError, match="conflicts with direction"):
+        ls.poincare_section(system, X[:2], (0.0, 5.0), ls.integrators.LinearEvent(omega=[0, 1, 0], direction=-1))
+    with pytest.raises(ValueError, match="section is terminal"):
+        ls.poincare_section(system, X[:2], (0.0, 5.0), ls.integrators.LinearEvent(omega=[0, 1, 0], terminal=True))
+
+
+def test_lyapunov_is_shift_invariant_and_refuses_rounding_level_settings():
+    heavy = ls.SuslovSystem(ls.Inertia.from_principal_moments([1.0, 2.0, 3.0]),
+                            constraints=ls.Subspace(SO3, np.eye(3)), potential=ls.LinearPotential([1.0, 0.7, 0.4]))
+    x0, G0 = coords3([1.2, -0.9, 1.5]), [0.6, 0.0, 0.8]
+    lam = ls.lyapunov_exponent(heavy, x0, (0.0, 20.0), Gamma0=G0, seed=0)
+    # autonomous: integrated from 0 whatever t0 (t0 = 1e10 gave 0.746 against 0.104)
+    assert ls.lyapunov_exponent(heavy, x0, (1e10, 1e10 + 20.0), Gamma0=G0, seed=0) == lam
+    with pytest.raises(ValueError, match="within the rounding of the state"):
+        ls.lyapunov_exponent(heavy, x0, (0.0, 20.0), Gamma0=G0, seed=0, delta=1e-14)
+    with pytest.raises(ValueError, match="t_span is too short"):
+        ls.lyapunov_exponent(heavy, x0, (0.0, 1e-300), Gamma0=G0, seed=0)
+    assert np.isfinite(ls.lyapunov_exponent(heavy, x0, (0.0, 20.0), Gamma0=G0,
+                                            seed=np.random.SeedSequence([1, 2, 3])))
+    with pytest.raises(TypeError, match="t_span"):
+        ls.lyapunov_exponent(heavy, x0, ("0", "20"), Gamma0=G0)

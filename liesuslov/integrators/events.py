@@ -49,6 +49,11 @@ class EventRecord:
     n : int or None
         Matrix size (for :attr:`Omega`).
     algebra_name : str
+    status : ndarray of int, shape (...), or None
+        Set by :func:`~liesuslov.research.poincare_section` (a record that stands for a whole integration):
+        per trajectory 0 reached the end of t_span, -1 failed (its crossings stop at the failure).
+    message : str
+        With ``status``: the integration's message (the first failure, its reason and time).
     """
 
     t: np.ndarray
@@ -58,6 +63,8 @@ class EventRecord:
     g: np.ndarray | None = None
     n: int | None = None
     algebra_name: str = ""
+    status: np.ndarray | None = None
+    message: str = ""
 
     @property
     def Omega(self) -> np.ndarray | None:

@@ -190,11 +190,11 @@ class Problem:
         Omega, Gamma, g = self.user_state(xi, G)
         tt = float(t[0]) if shape == () else t.reshape(shape)
         value = self.events[e](tt, lead(Omega), lead(Gamma), lead(g))
-        try:
-            value = np.asarray(value, dtype=float)
-        except (TypeError, ValueError) as exc:
+        raw = np.asarray(value)
+        if value is None or raw.dtype.kind not in "biuf":  # None would be NaN, a complex value its real part
             raise TypeError(f"events[{e}] must return real numbers, one per trajectory; got "
-                            f"{type(value).__name__}") from exc
+                            f"{type(value).__name__}" + (f" of {raw.dtype}" if value is not None else ""))
+        value = raw.astype(float, copy=False)
         try:
             value = np.broadcast_to(value, shape)
         except ValueError:

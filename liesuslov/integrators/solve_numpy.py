@@ -132,6 +132,10 @@ class _Events:
                     GG[traj] = Gf
                 batch = (T, X, None if Gf is None else GG)
             out[:, c] = P.call_event(e, *batch)[traj]
+            if np.isnan(out[:, c]).any():  # the crossing rule cannot see through NaN: no crossing would be found
+                r = int(np.flatnonzero(np.isnan(out[:, c]))[0])
+                raise ValueError(f"events[{e}] returned NaN for trajectory {int(traj[r])} (flat index) at t = "
+                                 f"{float(t[r]):.17g}, a finite state; an event must return real numbers")
         return out
 
     def crossings(self, old: np.ndarray, new: np.ndarray) -> np.ndarray:

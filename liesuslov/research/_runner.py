@@ -14,9 +14,10 @@ from typing import Any
 import numpy as np
 
 from .._rows import rows_at
-from .._validation import as_float_array, check_positive
+from .._validation import as_float_array, check_positive, check_t_span
 from ..integrators import integrate
 from ..integrators.events import EventRecord, LinearEvent
+from ..integrators.problem import run_message
 
 #: Options of every research tool called without integrator options (the contract's defaults).
 DEFAULT_OPTIONS = {"method": "rkmk853", "rtol": 1e-10, "atol": 1e-12}
@@ -124,14 +125,13 @@ def prepare(system, Omega0, Gamma0=None, g0=None) -> Batch:
     return Batch(system, shape, x, G, g)
 
 
-def check_span(t_span, name: str = "t_span") -> tuple[float, float]:
-    """A pair ``(t0, t1)`` of finite numbers with ``t1 > t0``."""
-    try:
-        t0, t1 = (float(v) for v in t_span)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a pair of numbers (t0, t1), got {t_span!r}") from exc
-    if not (np.isfinite(t0) and np.isfinite(t1)) or t1 <= t0:
-        raise ValueError(f"{name} must be finite with t1 > t0, got {t_span!r}")
+def check_span(t_span) -> tuple[float, float]:
+    """A pair ``(t0, t1)`` of finite numbers with ``t1 > t0`` (integrate's check, plus the forward direction)."""
+    if isinstance(t_span, (list, tuple)) and any(isinstance(v, (bool, np.bool_)) for v in t_span):
+        raise TypeError(f"t_span must be a pair of numbers (t0, t1), got booleans {t_span!r}")
+    t0, t1 = check_t_span(t_span)
+    if t1 <= t0:
+        raise ValueError(f"t_span must have t1 > t0 (the research tools integrate forward), got {t_span!r}")
     return t0, t1
 
 
@@ -214,13 +214,29 @@ class Window:
     Gamma: np.ndarray | None
     g: np.ndarray | None
     status: np.ndarray       # (B,) 0 reached the end, -1 failed
+    why: np.ndarray          # (B,) object: integrate's reason for a failed trajectory ("" otherwise)
+    samples: tuple | None = None   # (omega (N, B, d), Gamma (N, B, n) or None) at the asked times, if any
+    message: str = ""        # integrate's
+
+
+def failure_reasons(sol, B: int) -> np.ndarray:
+    """Per trajectory (B,), why ``integrate`` failed it — its reason and time, as ``sol.message`` says the
+    first — or ""."""
+    status = np.broadcast_to(np.asarray(sol.status), (B,))
+    t_stop = np.broadcast_to(np.asarray(sol.stats["t_stop"], dtype=float), (B,))
+    code = np.broadcast_to(np.asarray(sol.stats["failure"]), (B,))
+    why = np.full(B, "", dtype=object)
+    for k in np.flatnonzero(status < 0):
+        why[k] = run_message(np.array([-1]), t_stop[k:k + 1], code[k:k + 1])
+    return why
 
 
 def run_window(batch_system, omega, Gamma, g, t_span, event, direction: int, opts: dict,
-               reconstruct: bool) -> Window:
+               reconstruct: bool, samples: int = 0) -> Window:
     """Integrate a flat batch over ``t_span`` and return the crossings of ``event`` in ``direction``.
 
-    ``event``: a linear event (planes possibly per trajectory) or a callable ``event(t, Omega, Gamma, g)``.
+    ``event``: a linear event (planes possibly per trajectory) or a callable ``event(t, Omega, Gamma, g)``;
+    ``samples`` > 1: also the states at that many evenly spaced times of ``t_span`` (``Window.samples``).
     """
     system = batch_system
     B = omega.shape[0]
@@ -230,6 +246,8 @@ def run_window(batch_system, omega, Gamma, g, t_span, event, direction: int, opt
     if reconstruct:
         kwargs["reconstruct"] = True
         kwargs["g0"] = g
+    if samples > 1:
+        kwargs["t_eval"] = np.linspace(t_span[0], t_span[1], samples)
     return _window_events(system, omega, t_span, event, direction, kwargs, B)
 
 
@@ -251,7 +269,8 @@ def _window_events(system, omega, t_span, event, direction, kwargs, B) -> Window
     status = np.broadcast_to(np.asarray(sol.status), (B,)).astype(int)
     G_end = None if sol.Gamma is None else sol.Gamma[-1]
     g_end = None if sol.g is None else sol.g[-1]
-    return Window(cr, sol.omega[-1], G_end, g_end, status)
+    samples = (sol.omega, sol.Gamma) if "t_eval" in kwargs else None
+    return Window(cr, sol.omega[-1], G_end, g_end, status, failure_reasons(sol, B), samples, sol.message)
 
 
 def rates(omega: np.ndarray, xdot: np.ndarray) -> np.ndarray:
@@ -264,20 +283,32 @@ def rates(omega: np.ndarray, xdot: np.ndarray) -> np.ndarray:
     return np.maximum(1.0, np.maximum(w, np.sqrt(acc)))
 
 
-def make_record(cr: Crossings, n: int | None, algebra_name: str) -> EventRecord:
+def make_record(cr: Crossings, n: int | None, algebra_name: str, status=None, message: str = "") -> EventRecord:
     """An :class:`EventRecord` from flat crossings."""
     return EventRecord(t=cr.t, index=cr.index, omega=cr.omega, Gamma=cr.Gamma, g=cr.g, n=n,
-                       algebra_name=algebra_name)
+                       algebra_name=algebra_name, status=status, message=message)
 
 
-def run_plain(system, omega, Gamma, g, t_span, opts: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Integrate a flat batch with the attitude from ``g`` over ``t_span``: ``(g at t1 (B, m, m), status (B,))``."""
+#: A reduced speed at most this times |s0| is an equilibrium to the integrator's resolution; otherwise a crossing
+#: before ``start_time`` is the start itself (a root at t0, located ~eps |s0| / speed after it: 1e-17..1e-16).
+STILL = 1e-12
+
+
+def start_time(speed: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Per trajectory, the time after t0 within which a crossing is the start itself: ``STILL (1 + |s0| / speed)``."""
+    return STILL * (1.0 + scale / np.maximum(speed, np.finfo(float).tiny))
+
+
+def run_plain(system, omega, Gamma, g, t_span, opts: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Integrate a flat batch with the attitude from ``g`` over ``t_span``: ``(g at t1 (B, m, m), status (B,),
+    why (B,))`` (:func:`failure_reasons`)."""
     kwargs = dict(opts)
     if Gamma is not None:
         kwargs["Gamma0"] = Gamma
     sol = integrate(system, omega, t_span, reconstruct=True, g0=g, **kwargs)
-    status = np.broadcast_to(np.asarray(sol.status), (omega.shape[0],)).astype(int)
-    return sol.g[-1], status
+    B = omega.shape[0]
+    status = np.broadcast_to(np.asarray(sol.status), (B,)).astype(int)
+    return sol.g[-1], status, failure_reasons(sol, B)
 
 
 def positive(value, name: str) -> float:

@@ -222,6 +222,13 @@ def solid_angle(u, dt: float | np.ndarray, p=None) -> np.ndarray:
 # ------------------------------------------------------------------------------------- the tool
 #: Default closure of an accepted return, ``|s(T) - s0| <= RETURN_TOL |s0|`` on the checking re-integration.
 RETURN_TOL = 1e-7
+#: An accepted return also closes to this fraction of the orbit's size (its largest distance from s0, sampled
+#: at :data:`ORBIT_SAMPLES` times of each window of the checking re-integration).
+ORBIT_CLOSURE = 1e-5
+ORBIT_SAMPLES = 65
+#: ... unless it closes to this (relative to |s0|): the rounding level of the checking re-integration (rtol 1e-12),
+#: where the orbit of a state near an equilibrium may be smaller than its closure / ORBIT_CLOSURE.
+CLOSURE_FLOOR = 1e-13
 #: ``R`` fixes a unit vector ``u`` when ``|R u - u| <= FIX_FLOOR + FIX_FACTOR * eps`` (``eps``: R's error).
 FIX_FLOOR = 1e-7
 FIX_FACTOR = 4.0
@@ -306,23 +313,25 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
     closure = np.full(B, np.nan)
     count = np.zeros(B, dtype=int)
     want_axes = m == 3 and system.is_so
+    why = np.full(B, "", dtype=object)  # integrate's reason for a failed trajectory
     if period is None:
         _search(system, b, s0, scale, return_tol, screen, t_max, opts, tight, T, Rm, Rt, status, dist, closure,
-                count)
+                count, why, on_failure == "raise")
     else:
         P = _period(period, b.shape)
         ident = np.broadcast_to(np.eye(m), (B, m, m)).copy()
         for val in np.unique(P):
             rows = np.nonzero(P == val)[0]
             G = None if b.Gamma is None else b.Gamma[rows]
-            g_end, st = R.run_plain(system, b.omega[rows], G, ident[rows], (0.0, float(val)), opts)
+            g_end, st, why_rows = R.run_plain(system, b.omega[rows], G, ident[rows], (0.0, float(val)), opts)
             T[rows] = val
             Rm[rows] = g_end
             status[rows] = np.where(st < 0, -1, 0)
+            why[rows] = why_rows
             if want_axes:
                 Rt[rows] = g_end if tight is None else R.run_plain(system, b.omega[rows], G, ident[rows],
                                                                    (0.0, float(val)), tight)[0]
-    message = _message(status, dist, closure, t_max, return_tol, tight)
+    message = _message(status, dist, closure, t_max, return_tol, tight, why)
     if on_failure == "raise" and np.any(status != 0):
         raise ValueError(message)
     # ---- derived quantities
@@ -371,14 +380,19 @@ def _period(period, shape) -> np.ndarray:
     return P.reshape(-1)
 
 
-def _message(status, dist, closure, t_max, tol, tight) -> str:
+def _message(status, dist, closure, t_max, tol, tight, why) -> str:
     if np.all(status == 0):
         return "every trajectory returned"
     parts = []
-    nr = int(np.sum(status == 1))
+    still = (status == 1) & (why != "")
+    if np.any(still):
+        parts.append(f"{int(np.sum(still))} trajectory(ies) start at an equilibrium of the reduced flow (the first: "
+                     f"flat index {int(np.flatnonzero(still)[0])}): no period; pass period= to get R = exp(T Omega0)")
+    wait = (status == 1) & (why == "")
+    nr = int(np.sum(wait))
     if nr:
-        d = dist[status == 1]
-        c = closure[status == 1]
+        d = dist[wait]
+        c = closure[wait]
         if np.any(np.isfinite(d)):
             closest = f"; the closest return was at a relative distance {np.nanmin(d):.3g}"
             if np.any(np.isfinite(c)):
@@ -392,7 +406,8 @@ def _message(status, dist, closure, t_max, tol, tight) -> str:
                      "quasi-periodic), or raise t_max")
     nf = int(np.sum(status == -1))
     if nf:
-        parts.append(f"{nf} integration(s) failed before a return")
+        k = int(np.flatnonzero(status == -1)[0])
+        parts.append(f"{nf} trajectory(ies) failed; the first (flat index {k}): {why[k] or 'integration failed'}")
     return "; ".join(parts)
 
 
@@ -409,11 +424,16 @@ class _Check:
         self.g = np.eye(m)[None]
         self.crossings: list[tuple[float, float, np.ndarray]] = []
         self.failed = False
+        self.size = 0.0  # the orbit's size so far: the largest sampled |s(t) - s0| / |s0|
 
     def advance(self, system, b, plane, s0, scale, t_min, t_end, tight) -> None:
         if self.failed or t_end <= self.t:
             return
-        win = R.run_window(system, self.omega, self.Gamma, self.g, (self.t, t_end), plane, 1, tight, True)
+        win = R.run_window(system, self.omega, self.Gamma, self.g, (self.t, t_end), plane, 1, tight, True,
+                           samples=ORBIT_SAMPLES)
+        om, Ga = win.samples
+        s = b.reduced(om[:, 0], None if Ga is None else Ga[:, 0])
+        self.size = max(self.size, float(np.nanmax(np.linalg.norm(s - s0, axis=-1), initial=0.0)) / scale)
         cr = win.crossings
         for j in range(cr.t.size):
             if cr.t[j] <= t_min:
@@ -440,7 +460,7 @@ CHECK_WINDOW = 1e-2
 
 
 def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, status, dist, closure,
-            count) -> None:
+            count, why, raise_still: bool) -> None:
     """Per trajectory, windows of doubling length until it has returned, failed or reached t_max.
 
     Everything is per trajectory (the plane, the first window's length, the checks); trajectories whose
@@ -452,14 +472,15 @@ def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, st
     off = np.sum(xdot * b.omega, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot * b.Gamma, axis=-1))
     plane = R.make_plane(omega=xdot, Gamma=Gdot, offset=off, direction=1)
     speed = np.sqrt(np.sum(xdot ** 2, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot ** 2, axis=-1)))
-    still = np.nonzero(speed <= 1e-14 * np.maximum(scale, 1.0))[0]
-    if still.size:
-        raise ValueError(f"Omega0: the initial state of trajectory {int(still[0])} (flat index) is an equilibrium of "
-                         "the reduced flow (zero velocity): it has no period; pass period= to get R = exp(T Omega0)")
-    # the first return cannot come before the state has moved away: ignore crossings closer to t0
-    # than a rounding-level time (a root located at t0 itself)
-    t_min = 1e-9 * (1.0 + scale / np.maximum(speed, np.finfo(float).tiny))
+    still = speed <= R.STILL * np.maximum(scale, 1.0)
+    if raise_still and np.any(still):
+        raise ValueError(f"Omega0: the initial state of trajectory {int(np.flatnonzero(still)[0])} (flat index) is an "
+                         f"equilibrium of the reduced flow (speed <= {R.STILL:g} |s0|): it has no period to resolve; "
+                         "pass period= to get R = exp(T Omega0)")
+    # the first return cannot come before the state has moved away (R.start_time: a root at t0 itself)
+    t_min = R.start_time(speed, scale)
     status[:] = 1
+    why[still] = "an equilibrium of the reduced flow: no period"
     omega, Gamma = b.omega.copy(), None if b.Gamma is None else b.Gamma.copy()
     g = np.broadcast_to(np.eye(m), (B, m, m)).copy()
     # each trajectory's first window: ~32 / rate, rounded down to a power of two (so that trajectories of
@@ -467,7 +488,7 @@ def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, st
     width = np.minimum(2.0 ** np.floor(np.log2(32.0 / R.rates(b.omega, xdot))), t_max)
     t_a = np.zeros(B)
     checks: dict[int, _Check] = {}
-    active = np.ones(B, dtype=bool)
+    active = ~still
     while np.any(active):
         t_b = np.minimum(t_max, t_a + width)
         keys = sorted({(t_a[k], t_b[k]) for k in np.nonzero(active)[0]})
@@ -500,16 +521,21 @@ def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, st
                     found = chk.near(float(cr.t[j]), CHECK_WINDOW * float(cr.t[j]))
                     if found is None and chk.failed:
                         status[k] = -1
+                        why[k] = "the checking re-integration of a candidate return failed"
                         done[loc] = True
                         continue
                 if found is None:
                     continue
                 closure[k] = found[1] if not np.isfinite(closure[k]) else min(closure[k], found[1])
-                if found[1] <= tol:
+                # closed relative to |s0| and to the orbit's own size (sampled on the checking re-integration):
+                # a small quasi-periodic orbit near an equilibrium comes back within tol |s0| without closing
+                size = np.inf if tight is None else checks[k].size
+                if found[1] <= tol and (found[1] <= ORBIT_CLOSURE * size or found[1] <= CLOSURE_FLOOR):
                     T[k], Rm[k], Rt[k], dist[k], closure[k], status[k] = cr.t[j], cr.g[j], found[2], d, found[1], 0
                     done[loc] = True
             failed = (win.status < 0) & ~done
             status[rows[failed]] = -1
+            why[rows[failed]] = win.why[failed]
             omega[rows] = win.omega
             if Gamma is not None:
                 Gamma[rows] = win.Gamma

@@ -8,6 +8,7 @@ integrator evaluates natively.
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -84,6 +85,13 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
     if not callable(section):
         raise TypeError(f"section must be a callable section(t, Omega, Gamma, g) or a linear event (ls.research."
                         f"plane(...)), got {type(section).__name__}")
+    if getattr(section, "terminal", False):
+        raise ValueError("section is terminal: poincare_section collects every crossing over t_span; pass a "
+                         "section with terminal=False (or integrate(..., events=[...]) to stop at one)")
+    own = getattr(section, "direction", 0)
+    if own not in (0, direction):
+        raise ValueError(f"section.direction = {own!r} conflicts with direction={direction!r}: pass the direction "
+                         "you want as direction= (the section's own is then 0 or the same)")
     t0, t1 = R.check_span(t_span)
     opts = R.options_with_defaults(options)
     b = R.prepare(system, Omega0, Gamma0, g0)
@@ -99,7 +107,20 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
     elif not reconstruct:
         section = _without_attitude(section, system.n)
     win = R.run_window(system, b.omega, b.Gamma, g, (t0, t1), section, int(direction), opts, reconstruct)
-    return R.make_record(win.crossings, system.n, system.algebra.name)
+    cr = win.crossings
+    # a crossing within a rounding-level time of t0 is the start itself (e.g. a return plane through s0)
+    s0 = b.reduced(b.omega, b.Gamma)
+    xdot, Gdot = system.rhs(b.omega, b.Gamma)
+    speed = np.linalg.norm(xdot if Gdot is None else np.concatenate([xdot, Gdot], axis=-1), axis=-1)
+    keep = cr.t - t0 > R.start_time(speed, np.linalg.norm(s0, axis=-1))[cr.index]
+    if not np.all(keep):
+        cr = R.Crossings(cr.t[keep], cr.index[keep], cr.omega[keep], None if cr.Gamma is None else cr.Gamma[keep],
+                         None if cr.g is None else cr.g[keep])
+    status = win.status.reshape(b.shape)
+    if np.any(status < 0):
+        warnings.warn(f"poincare_section: {win.message} (its crossings stop there; record.status says which "
+                      "trajectories failed)", RuntimeWarning, stacklevel=2)
+    return R.make_record(cr, system.n, system.algebra.name, status=status, message=win.message)
 
 
 def _check_plane(section, system, has_gamma: bool) -> None:
