@@ -805,3 +805,16 @@ def test_se_rejects_what_is_not_2_or_3():
     with pytest.raises(ValueError, match="n = 4"):
         ls.se(4)
     assert ls.se(np.int64(3)).name == "se(3)"
+
+
+def test_jacobi_is_checked_at_any_scale_and_so_n_is_bounded():
+    """Constants of 1e160 overflowed the Jacobi residual to NaN (and passed), of 1e-200 underflowed it to 0;
+    so(10^6) ran into a MemoryError (n^2 tables)."""
+    r = np.random.default_rng(0).normal(size=(3, 3, 3))
+    x = r - r.transpose(1, 0, 2)
+    for scale in (1.0, 1e160, 1e-200):
+        with pytest.raises(ValueError, match="Jacobi"):
+            ls.LieAlgebra(scale * x)
+    assert ls.LieAlgebra(1e160 * ls.so(3).structure_constants).dim == 3
+    with pytest.raises(ValueError, match="largest size"):
+        ls.so(10**6)

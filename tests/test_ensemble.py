@@ -655,3 +655,9 @@ def test_dask_client_closed_or_without_workers(monkeypatch):
         c.close()
     finally:
         cluster.close()
+
+
+def test_a_batch_beyond_the_memory_is_refused():
+    system = _system()
+    with pytest.raises(ValueError, match="bookkeeping"):
+        ensemble(system, None, T_SPAN, sampler=uniform_sampler, n=10**13, **FIXED)

@@ -750,3 +750,12 @@ def test_complex_input_is_a_type_error_not_a_dropped_imaginary_part(where):
             kw = {"Omega0": Omega0 + 1e-3j if where == "Omega0" else Omega0,
                   "Gamma0": Gamma0 + 1e-3j if where == "Gamma0" else Gamma0}
             ls.integrate(system, kw["Omega0"], (0.0, 0.1), Gamma0=kw["Gamma0"], method="rkmk4", h=0.05)
+
+
+def test_a_potential_returning_a_stacked_array_for_a_pair_is_caught():
+    """FamilyPotential's derivatives return a pair; one returning np.stack(..., -1) passed the probe on a batch
+    of 2 (unpacking its rows) and mixed the trajectories of every batch of 2."""
+    p = FamilyPotential(lambda s, r: s * r, lambda s, r: np.stack([r, s], -1), lambda t, q: t * q,
+                        lambda t, q: np.stack([q, t], -1))
+    with pytest.raises(ValueError, match="potential could not be evaluated"):
+        SuslovSystem(Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])), potential=p)

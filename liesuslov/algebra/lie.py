@@ -225,16 +225,18 @@ def _check_lie_constants(C: np.ndarray, rtol: float) -> None:
         i, j, k = np.unravel_index(np.argmax(asym), C.shape)
         raise ValueError("structure_constants are not antisymmetric: C[i, j, k] = -C[j, i, k] fails, "
                          f"worst at (i, j, k) = ({i}, {j}, {k}) with |C_ijk + C_jik| = {worst:.3g}")
-    # Jac[i, j, k, m] = ([[e_i, e_j], e_k] + [[e_j, e_k], e_i] + [[e_k, e_i], e_j])_m
-    t = np.einsum("ijl,lkm->ijkm", C, C)
+    # Jac[i, j, k, m] = ([[e_i, e_j], e_k] + [[e_j, e_k], e_i] + [[e_k, e_i], e_j])_m, of C / max|C| (so that
+    # C of 1e200 does not overflow to NaN, nor C of 1e-200 underflow to 0, and pass)
+    Cn = C / scale
+    t = np.einsum("ijl,lkm->ijkm", Cn, Cn)
     jac = t + t.transpose(1, 2, 0, 3) + t.transpose(2, 0, 1, 3)
     bad = np.abs(jac).max(axis=3)
-    worst = float(bad.max())
-    if worst > rtol * scale * scale * C.shape[0]:
+    worst = float(bad.max())  # relative to max|C|^2
+    if not worst <= rtol * C.shape[0]:
         i, j, k = np.unravel_index(np.argmax(bad), bad.shape)
         raise ValueError("structure_constants violate the Jacobi identity "
                          "[[e_i, e_j], e_k] + [[e_j, e_k], e_i] + [[e_k, e_i], e_j] = 0: "
-                         f"worst at (i, j, k) = ({i}, {j}, {k}) with residual {worst:.3g}")
+                         f"worst at (i, j, k) = ({i}, {j}, {k}) with residual {worst:.3g} max|C|^2")
 
 
 def _constants_from_matrices(R: np.ndarray) -> np.ndarray:

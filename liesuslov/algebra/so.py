@@ -161,7 +161,14 @@ def so(n: int) -> SpecialOrthogonalAlgebra:
         raise TypeError(f"n must be an integer >= 2, got {type(n).__name__}")
     if n < 2:
         raise ValueError(f"n must be >= 2 for so(n), got {n}")
+    if n > SO_MAX_N:
+        raise ValueError(f"n = {n} is beyond so(n)'s largest size {SO_MAX_N}: its index tables hold n^2 entries "
+                         f"({8 * n * n / 1e9:.3g} GB each; n = 10^4 already takes seconds to build)")
     return _so_cached(int(n))
+
+
+#: The largest n of :func:`so` (its tables are n×n; the low-rank kernel runs Fedorov–Kozlov to n = 256).
+SO_MAX_N = 10_000
 
 
 def wedge(x, y) -> np.ndarray:

@@ -163,6 +163,7 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     B = math.prod(batch_shape)
     if B == 0:
         raise ValueError(f"the batch of initial data is empty (batch shape {batch_shape})")
+    _check_bookkeeping(B)
 
     W = _n_workers(executor)
     if chunk_size is None:
@@ -446,6 +447,24 @@ def _chunk_events(events, batch_shape: tuple[int, ...], start: int, stop: int):
                            terminal=e.terminal, direction=e.direction)
 
     return [one(e) for e in events] if isinstance(events, (list, tuple)) else one(events)
+
+
+#: Bytes this process keeps per trajectory whatever the store (status, stop time and failure code, the chunk list).
+_BYTES_PER_TRAJECTORY = 32
+
+
+def _check_bookkeeping(B: int) -> None:
+    """``ValueError`` when the per-trajectory bookkeeping of ``B`` trajectories would not fit in half the machine's
+    memory (n = 10^11 grew to the whole memory, then died in a MemoryError)."""
+    try:
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):  # not POSIX: no check
+        return
+    need = _BYTES_PER_TRAJECTORY * B
+    if need > memory // 2:
+        raise ValueError(f"n / the batch: {B} trajectories need {need / 1e9:.3g} GB of bookkeeping in this process "
+                         f"(status, stop time per trajectory), more than half of its {memory / 1e9:.3g} GB; split "
+                         "the run into several ensembles")
 
 
 def _prepare_store(store, overwrite: bool) -> Path:

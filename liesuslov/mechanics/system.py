@@ -400,16 +400,20 @@ class SuslovSystem:
 
 # ---------------------------------------------------------------------- helpers
 def _probe_potential(potential: Potential, n: int) -> None:
-    """Evaluate a user potential on a small batch to catch wrong shapes early, naming the callable."""
-    G = np.zeros((2, n))
-    G[:, -1] = 1.0
+    """Evaluate a user potential on a small batch to catch wrong shapes early, naming the callable.
+
+    The batch is (3, 1): two batch axes, as the integrators pass, and no size equal to 2 (a batch of 2 let a
+    function returning (..., 2) where a pair is due pass — and mix its rows)."""
+    G = np.zeros((3, 1, n))
+    G[:, 0, -1] = 1.0
+    shape = f"(3, 1, {n})"
     try:
         V = np.asarray(potential.V(G))
         g = np.asarray(potential.grad(G))
     except Exception as exc:  # noqa: BLE001 - re-raised with the context
-        raise ValueError(f"potential could not be evaluated on Gamma of shape (2, {n}): {exc}") from exc
-    if V.shape != (2,):
-        raise ValueError(f"potential.V must map (..., {n}) to (...): got shape {V.shape} for input (2, {n})")
-    if g.shape != (2, n):
+        raise ValueError(f"potential could not be evaluated on Gamma of shape {shape}: {exc}") from exc
+    if V.shape != (3, 1):
+        raise ValueError(f"potential.V must map (..., {n}) to (...): got shape {V.shape} for input {shape}")
+    if g.shape != (3, 1, n):
         raise ValueError(f"potential.grad must map (..., {n}) to (..., {n}): got shape {g.shape} "
-                         f"for input (2, {n})")
+                         f"for input {shape}")
