@@ -804,3 +804,15 @@ def test_suslov3_asymptotic_points_for_a_general_constraint_vector():
         suslov3_asymptotic_points(J, 1.0, a=[0.0, 0.0, 2.0])
     with pytest.raises(ValueError, match="a is an eigenvector of J"):
         suslov3_asymptotic_points(np.diag([1.0, 2.0, 3.0]), 1.0, a=[0.0, 1.0, 0.0])
+
+
+def test_euler_top_at_the_middle_axis_is_steady_or_refused():
+    """The steady rotation about the middle axis (the separatrix's end) gave NaN states; exactly on the axis it
+    is that rotation, off it by less than rounding resolves a ValueError."""
+    from liesuslov.analytic.euler_top import EulerTop
+
+    top = EulerTop([1.0, 2.0, 3.0], [[0.3, 0.2, 1.0], [0.0, 2.0, 0.0]])
+    w = top.state([0.0, 1.0, 50.0])
+    assert np.array_equal(w[:, 1], np.tile([0.0, 2.0, 0.0], (3, 1))) and np.all(np.isfinite(w))
+    with pytest.raises(ValueError, match="middle axis"):
+        EulerTop([1.0, 2.0, 3.0], [1e-9, 1.0, 0.0])

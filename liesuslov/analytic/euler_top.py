@@ -142,6 +142,19 @@ class EulerTop:
         cn_v, cn_a = np.where(around3, v[:, 0], v[:, 2]), np.where(around3, a1, a3)
         phi0 = np.arctan2(v[:, 1] * cn_a, s * cn_v * a2)
         u0 = ellipkinc(phi0, k2)
+        # u0 infinite: the state is the separatrix's end, the steady rotation about the middle axis (an unstable
+        # equilibrium). Exactly on the axis the motion is that rotation; off it by less than rounding resolves
+        # (k^2 = 1 in floating point), the closed form cannot say when it leaves: a ValueError, not NaN.
+        on_axis = (v[:, 0] == 0.0) & (v[:, 2] == 0.0)
+        unresolved = ~np.isfinite(u0) & ~on_axis
+        if np.any(unresolved):
+            bad = w0.reshape(-1, 3)[int(np.flatnonzero(unresolved)[0])].tolist()
+            raise ValueError(f"w0 = {bad} is, to rounding, the steady rotation about the middle axis (an unstable "
+                             "equilibrium): the closed form cannot resolve when the body leaves it; integrate it "
+                             "numerically")
+        self._steady = on_axis
+        self._w0 = w0.reshape(-1, 3)
+        u0 = np.where(on_axis, 0.0, u0)
         self._lam, self._k2, self._s, self._u0 = lam, k2, s, u0
         self._a = np.stack([a1, a2, a3], axis=-1)
         self.parameter = k2.reshape(self.batch_shape)
@@ -178,6 +191,7 @@ class EulerTop:
         s, r3 = self._s, self._around3
         v = np.stack([s * a1 * np.where(r3, cn, dn), a2 * sn, s * a3 * np.where(r3, dn, cn)], axis=-1)
         w = self._sign * self._unsort(v)
+        w = np.where(self._steady[:, None], self._w0, w)  # the steady rotation about the middle axis: constant
         return w.reshape(t.shape + self.batch_shape + (3,))
 
     def momentum_vector(self, t: Any) -> np.ndarray:
