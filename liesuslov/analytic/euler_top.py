@@ -71,7 +71,9 @@ class EulerTop:
         Principal moments ``(J1, J2, J3)`` acting on ``w`` (distinct, positive).
     w0 : array_like, shape (..., 3)
         Initial body angular velocity (the paper's vector ``w``; ``so(3)`` coordinates are
-        ``(-w3, w2, -w1)``), not zero.
+        ``(-w3, w2, -w1)``), not zero. Exactly along the middle axis it is the steady rotation (constant);
+        off that axis by less than rounding resolves, a ``ValueError`` (the closed form has ``k^2 = 1`` and
+        cannot say when the body leaves the unstable rotation).
 
     Attributes
     ----------
