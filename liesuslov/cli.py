@@ -598,7 +598,7 @@ def _potential_table(p) -> Any:
 def _cmd_ensemble(args) -> int:
     from .ensembles import Perturbation, ensemble
 
-    for name, value, low in (("--n", args.n, 1), ("--workers", args.workers, 0)):
+    for name, value, low in (("--n", args.n, 1), ("--workers", args.workers, 0), ("--seed", args.seed, 0)):
         if value < low:
             raise _UserError(f"{name} must be >= {low}, got {value}")
     scene = _load(args.scene, t_end=args.t_end, backend=args.backend)

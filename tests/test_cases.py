@@ -279,3 +279,15 @@ def test_cases_pickle_with_their_integrals(name):
     for key in want:
         np.testing.assert_array_equal(got[key], want[key])
     assert again.parameters.keys() == case.parameters.keys()
+
+
+def test_random_state_names_its_bad_arguments():
+    from liesuslov.mechanics import cases
+
+    case = cases.klebsh_tisserand([1.0, 1.5, 2.0, 0.5], [4.0, 3.0, 2.5, 1.0])
+    for kw, exc, says in ((dict(scale=np.nan), ValueError, "scale"), (dict(scale="x"), TypeError, "scale"),
+                          (dict(batch=(2.7,)), TypeError, "batch"), (dict(rng=-1), ValueError, "rng"),
+                          (dict(rng="seed"), TypeError, "rng")):
+        with pytest.raises(exc, match=says):
+            case.random_state(**kw)
+    assert case.random_state(0, batch=(2, 3))[0].shape == (2, 3, 6)

@@ -246,3 +246,21 @@ def test_section_command_writes_crossings_and_integral_drift(tmp_path, capsys):
     assert drifts and max(drifts) < 1e-7
     assert cli.main(["section", str(SCENES / "lagrange3.toml"), "--index", "7", "--out", str(out)]) == 2
     assert "--index" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv,says", [
+    (["section", "--value", "nan"], "--value must be a finite number"),
+    (["section", "--scale", "nan"], "--scale must be a finite number"),
+    (["ensemble", "--seed", "-1", "--n", "4"], "--seed must be >= 0"),
+])
+def test_bad_options_are_named(tmp_path, capsys, argv, says):
+    """The audit's cases: --value nan was reported as '--index: LinearEvent offset must be finite', --scale nan
+    as 'Gamma contains NaN', --seed -1 as numpy's 'expected non-negative integer'."""
+    assert cli.main(argv + ["--out", str(tmp_path / "o"), str(SCENES / "lagrange3.toml")]) == 2
+    assert says in capsys.readouterr().err
+
+
+def test_bench_refuses_an_unknown_backend(capsys):
+    """--backend gpu was ignored (exit 0, the summary said 'numpy')."""
+    assert cli.main(["bench", "--quick", "--backend", "gpu"]) == 2
+    assert "invalid choice" in capsys.readouterr().err

@@ -630,3 +630,14 @@ def test_lyapunov_is_shift_invariant_and_refuses_rounding_level_settings():
                                             seed=np.random.SeedSequence([1, 2, 3])))
     with pytest.raises(TypeError, match="t_span"):
         ls.lyapunov_exponent(heavy, x0, ("0", "20"), Gamma0=G0)
+
+
+def test_section_helpers_and_direction_name_their_bad_arguments():
+    with pytest.raises(TypeError, match="n must be an integer"):
+        gamma_crossing("3")
+    with pytest.raises(ValueError, match="n must be an integer >= 2"):
+        gamma_crossing(1)
+    J = np.array([1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match="direction must be 1"):
+        ls.poincare_section(free_body(J), coords3([0.3, 0.2, 1.0]), (0.0, 5.0), plane(omega=[0.0, 1.0, 0.0]),
+                            direction=np.array([1, 1]))

@@ -29,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="timed repeats after the warm-up run (default 5; --quick 1)")
     parser.add_argument("--docs", default=None, metavar="PATH",
                         help="also write the documentation page (e.g. docs/performance.md; plots go to img/ beside it)")
-    parser.add_argument("--backend", default=None,
+    parser.add_argument("--backend", default=None, choices=("auto", "numpy", "numba"),
                         help="passed to integrate(backend=...) when liesuslov has the option (default: the "
                              "library's default; --quick: numpy, which needs no compilation)")
 

@@ -215,6 +215,11 @@ def coordinate_plane(variable: str, index: int, value: float = 0.0, *, dim: int,
     """
     if variable not in ("omega", "Gamma"):
         raise ValueError(f"variable must be 'omega' or 'Gamma', got {variable!r}")
+    for name, val in (("dim", dim), ("index", index)):
+        if isinstance(val, (bool, np.bool_)) or not isinstance(val, (int, np.integer)):
+            raise TypeError(f"{name} must be an integer, got {type(val).__name__} {val!r}")
+    if dim < 1:
+        raise ValueError(f"dim must be >= 1 (the dimension of {variable}), got {dim}")
     if not -dim <= index < dim:
         raise ValueError(f"index {index} is out of range for {variable} of dimension {dim}")
     coef = np.zeros(dim)
@@ -224,6 +229,10 @@ def coordinate_plane(variable: str, index: int, value: float = 0.0, *, dim: int,
 
 def gamma_crossing(n: int, index: int = -1, *, terminal: bool | int = False, direction: int = 0) -> LinearEvent:
     """``Gamma[index] = 0`` (default the last component, Gamma_n: the Klebsh–Tisserand section)."""
+    if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)):
+        raise TypeError(f"n must be an integer >= 2 (the dimension of Gamma), got {type(n).__name__} {n!r}")
+    if n < 2:
+        raise ValueError(f"n must be an integer >= 2 (the dimension of Gamma), got {n}")
     return coordinate_plane("Gamma", index, 0.0, dim=n, terminal=terminal, direction=direction)
 
 

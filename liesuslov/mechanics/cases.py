@@ -95,8 +95,14 @@ class Case:
         Gamma : ndarray of shape (..., n), or None
             None when the system does not need it.
         """
-        rng = np.random.default_rng(rng)
+        if isinstance(rng, (bool, np.bool_, str, bytes, float)):
+            raise TypeError(f"rng must be None, a non-negative int or a numpy Generator, got {type(rng).__name__}")
+        try:
+            rng = np.random.default_rng(rng)
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"rng must be None, a non-negative int or a numpy Generator: {exc}") from exc
         shape = _batch_shape(batch)
+        scale = check_real(scale, "scale")
         D = self.system.constraints
         omega = (scale * rng.standard_normal(shape + (D.dim,))) @ D.basis
         if not self.system.needs_gamma:
@@ -125,6 +131,10 @@ class CaseEntry:
 
 
 # ====================================================================== helpers
+def _no_int(b):
+    raise TypeError(b)  # (int(2.7) would truncate a size silently)
+
+
 def _batch_shape(batch) -> tuple[int, ...]:
     """A batch shape from an int ``N`` (``(N,)``) or a tuple of ints, as numpy's ``size``."""
     if isinstance(batch, (int, np.integer)) and not isinstance(batch, bool):
@@ -132,7 +142,8 @@ def _batch_shape(batch) -> tuple[int, ...]:
     try:
         if isinstance(batch, (str, bytes)):
             raise TypeError(batch)
-        shape = tuple(int(b) for b in batch)
+        shape = tuple(b if isinstance(b, (int, np.integer)) and not isinstance(b, bool) else _no_int(b)
+                      for b in batch)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"batch must be an int or a tuple of ints (the batch shape), got {batch!r}") from exc
     if any(b < 0 for b in shape):

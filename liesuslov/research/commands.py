@@ -100,6 +100,13 @@ def run_section(args, load, user_error) -> int:
     system = scene.system
     if args.n < 1:
         raise user_error(f"--n must be >= 1, got {args.n}")
+    for opt, val in (("--value", args.value), ("--scale", args.scale)):
+        if not np.isfinite(val):
+            raise user_error(f"{opt} must be a finite number, got {val}")
+    if args.scale <= 0.0:
+        raise user_error(f"--scale must be positive, got {args.scale}")
+    if args.seed < 0:
+        raise user_error(f"--seed must be a non-negative integer, got {args.seed}")
     variable = args.variable or ("Gamma" if scene.Gamma0 is not None else "omega")
     if variable == "Gamma" and scene.Gamma0 is None:
         raise user_error("--variable Gamma: this scene has no Gamma (give [initial].Gamma or use --variable omega)")

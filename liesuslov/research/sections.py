@@ -80,7 +80,8 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
     >>> rec = poincare_section(system, Omega0, (0.0, 500.0), gamma_crossing(3), Gamma0=Gamma0)  # doctest: +SKIP
     >>> rec.Gamma[rec.index == 0]                                                               # doctest: +SKIP
     """
-    if isinstance(direction, (bool, np.bool_)) or direction not in (-1, 0, 1):
+    if isinstance(direction, (bool, np.bool_)) or not isinstance(direction, (int, np.integer)) or \
+            direction not in (-1, 0, 1):
         raise ValueError(f"direction must be 1 (upwards), -1 (downwards) or 0 (both), got {direction!r}")
     if not callable(section):
         raise TypeError(f"section must be a callable section(t, Omega, Gamma, g) or a linear event (ls.research."
