@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["rows_at"]
+__all__ = ["rows_at", "vectors"]
 
 
 def rows_at(x, M) -> np.ndarray:
@@ -27,3 +27,13 @@ def rows_at(x, M) -> np.ndarray:
     ndarray, shape (..., q), or (...) for a vector ``M``
     """
     return np.einsum("...i,i->..." if np.ndim(M) == 1 else "...i,ij->...j", x, M)
+
+
+def vectors(x, name: str, size: int) -> np.ndarray:
+    """``x`` as a float array of vectors (..., size), or a ``ValueError`` naming it — the check of the batch
+    methods of the algebra layer (numpy's IndexError or broadcasting message named neither the argument nor
+    the size it needs)."""
+    x = np.asarray(x, dtype=float)
+    if x.shape[-1:] != (size,):
+        raise ValueError(f"{name} must have shape (..., {size}), got {x.shape}")
+    return x

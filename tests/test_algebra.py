@@ -818,3 +818,21 @@ def test_jacobi_is_checked_at_any_scale_and_so_n_is_bounded():
     assert ls.LieAlgebra(1e160 * ls.so(3).structure_constants).dim == 3
     with pytest.raises(ValueError, match="largest size"):
         ls.so(10**6)
+
+
+def test_batch_methods_name_a_wrong_shape():
+    """Subspace, Inertia, se(n) and so(3)'s vector form raised numpy's IndexError or broadcasting messages."""
+    D = ls.Subspace(ls.so(3), np.eye(3)[:2])
+    J = ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0]))
+    for call, says in ((lambda: D.contains([1.0, 2.0]), "x must have shape"),
+                       (lambda: D.project([1.0, 2.0]), "x must have shape"),
+                       (lambda: D.from_coordinates([1.0, 2.0, 3.0]), "xi must have shape"),
+                       (lambda: J([1.0, 2.0]), "x must have shape"), (lambda: J.inverse([1.0]), "m must have shape"),
+                       (lambda: ls.se(3).hat(np.ones(5)), "x must have shape"),
+                       (lambda: ls.se(3).vee(np.ones((3, 3))), "X must have shape"),
+                       (lambda: ls.se(3).bracket(np.ones(6), np.ones(5)), "y must have shape"),
+                       (lambda: ls.so(3).to_vector3([1.0, 2.0]), "x must have shape")):
+        with pytest.raises(ValueError, match=says):
+            call()
+    with pytest.raises(TypeError, match="name must be a string"):
+        ls.LieAlgebra(ls.so(3).structure_constants, name=5)

@@ -17,7 +17,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .._rows import rows_at
+from .._rows import rows_at, vectors
 from .._validation import as_float_array, check_symmetric
 from .lie import LieAlgebra
 from .so import SpecialOrthogonalAlgebra, so
@@ -225,7 +225,7 @@ class Inertia:
         A diagonal mass tensor multiplies by ``I_i + I_j``; a large general one forms
         ``vee(I X + X I)`` (O(n³) per element, no d×d matrix).
         """
-        x = np.asarray(x, dtype=float)
+        x = vectors(x, "x", self.algebra.dim)
         if self.diagonal is not None:
             return x * self.diagonal
         if self._dense():
@@ -241,7 +241,7 @@ class Inertia:
         A large general mass tensor solves ``I X + X I = M`` in the eigenbasis of ``I = V Λ V^T``:
         ``X = V ((V^T M V)_ij / (λ_i + λ_j)) V^T`` (O(n³), no d×d matrix).
         """
-        m = np.asarray(m, dtype=float)
+        m = vectors(m, "m", self.algebra.dim)
         if self.diagonal is not None:
             return m / self.diagonal
         if self._dense():
@@ -253,7 +253,7 @@ class Inertia:
 
     def kinetic_energy(self, x) -> np.ndarray:
         """``1/2 <J x, x>``: (..., d) -> (...)."""
-        x = np.asarray(x, dtype=float)
+        x = vectors(x, "x", self.algebra.dim)
         return 0.5 * np.sum(self(x) * x, axis=-1)
 
     def restrict(self, D: Subspace) -> np.ndarray:

@@ -12,7 +12,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .._rows import rows_at
+from .._rows import rows_at, vectors
 from .._validation import as_float_array
 
 __all__ = ["LieAlgebra", "se"]
@@ -51,6 +51,8 @@ class LieAlgebra:
         self._C = C
         self._C.setflags(write=False)
         self._dim = C.shape[0]
+        if name is not None and not isinstance(name, str):
+            raise TypeError(f"name must be a string (a label for printing), got {type(name).__name__}")
         self.name = name or f"LieAlgebra(dim={self._dim})"
         self._rep = None
         if representation is not None:
@@ -109,8 +111,8 @@ class LieAlgebra:
         -------
         ndarray, shape (..., d)
         """
-        x = np.asarray(x, dtype=float)
-        y = np.asarray(y, dtype=float)
+        x = vectors(x, "x", self._dim)
+        y = vectors(y, "y", self._dim)
         return np.einsum("...j,...jk->...k", y, self._contract(x))
 
     def ad(self, x) -> np.ndarray:
@@ -124,7 +126,7 @@ class LieAlgebra:
         -------
         ndarray, shape (..., d, d), ``ad(x)[..., k, j] = sum_i x_i C[i, j, k]``.
         """
-        return np.swapaxes(self._contract(np.asarray(x, dtype=float)), -1, -2)
+        return np.swapaxes(self._contract(vectors(x, "x", self._dim)), -1, -2)
 
     def _contract(self, x: np.ndarray) -> np.ndarray:
         """``sum_i x_i C[i, j, k]``, shape (..., d, d) from x (..., d): the operations' common first factor.
@@ -151,8 +153,8 @@ class LieAlgebra:
         -------
         ndarray, shape (..., d)
         """
-        x = np.asarray(x, dtype=float)
-        m = np.asarray(m, dtype=float)
+        x = vectors(x, "x", self._dim)
+        m = vectors(m, "m", self._dim)
         return np.einsum("...jk,...k->...j", self._contract(x), m)
 
     @cached_property
@@ -195,7 +197,9 @@ class LieAlgebra:
         ndarray, shape (..., m, m)
         """
         R = self._require_rep()
-        return np.tensordot(np.asarray(x, dtype=float), R, axes=(-1, 0))
+        d, m = R.shape[0], R.shape[1]
+        x = vectors(x, "x", d)
+        return rows_at(x, R.reshape(d, m * m)).reshape(x.shape[:-1] + (m, m))  # (row-exact: not tensordot's BLAS)
 
     def vee(self, X) -> np.ndarray:
         """Representation matrices back to coordinates (least squares; exact on the image of hat).
@@ -211,7 +215,9 @@ class LieAlgebra:
         R = self._require_rep()
         X = np.asarray(X, dtype=float)
         m = R.shape[1]
-        return X.reshape(X.shape[:-2] + (m * m,)) @ self._rep_pinv
+        if X.shape[-2:] != (m, m):
+            raise ValueError(f"X must have shape (..., {m}, {m}) for {self.name}, got {X.shape}")
+        return rows_at(X.reshape(X.shape[:-2] + (m * m,)), self._rep_pinv)
 
 
 def _check_lie_constants(C: np.ndarray, rtol: float) -> None:

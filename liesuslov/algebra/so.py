@@ -16,6 +16,7 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 
+from .._rows import vectors
 from .lie import LieAlgebra
 
 __all__ = ["SpecialOrthogonalAlgebra", "so", "wedge", "pairing", "hat3", "vee3"]
@@ -130,13 +131,13 @@ class SpecialOrthogonalAlgebra(LieAlgebra):
     def to_vector3(self, x) -> np.ndarray:
         """so(3) coordinates ``(Omega_12, Omega_13, Omega_23)`` to ``w = (-Omega_23, Omega_13, -Omega_12)``."""
         self._need3()
-        x = np.asarray(x, dtype=float)
+        x = vectors(x, "x", 3)
         return np.stack([-x[..., 2], x[..., 1], -x[..., 0]], axis=-1)
 
     def from_vector3(self, w) -> np.ndarray:
         """``w`` (the cross-product form) to so(3) coordinates; inverse of :meth:`to_vector3`."""
         self._need3()
-        w = np.asarray(w, dtype=float)
+        w = vectors(w, "w", 3)
         return np.stack([-w[..., 2], w[..., 1], -w[..., 0]], axis=-1)
 
     def _need3(self) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._rows import rows_at, vectors
 from .._validation import as_float_array, check_symmetric
 from .lie import LieAlgebra
 
@@ -118,7 +119,7 @@ class Subspace:
         product), else through the basis (O(k d), not the d - k covectors: d - k ~ d^2/2 on so(n) with
         Fedorov–Kozlov constraints); squared norms on both sides.
         """
-        x = np.asarray(x, dtype=float)
+        x = vectors(x, "x", self.algebra.dim)
         tol = self.tol * 10 if tol is None else tol
         bound = tol * tol
         floor = atol * atol
@@ -177,12 +178,13 @@ class Subspace:
         return Subspace(self.algebra, _canonical_basis(null.T, d), tol=self.tol)
 
     def coordinates(self, x) -> np.ndarray:
-        """Coordinates ``xi = x @ basis.T`` of (the orthogonal projection of) x: (..., d) -> (..., k)."""
-        return np.asarray(x, dtype=float) @ self.basis.T
+        """Coordinates ``xi = x @ basis.T`` of (the orthogonal projection of) x: (..., d) -> (..., k), each row
+        summed alone (:func:`~liesuslov._rows.rows_at`)."""
+        return rows_at(vectors(x, "x", self.algebra.dim), self.basis.T)
 
     def from_coordinates(self, xi) -> np.ndarray:
-        """``x = xi @ basis``: (..., k) -> (..., d)."""
-        return np.asarray(xi, dtype=float) @ self.basis
+        """``x = xi @ basis``: (..., k) -> (..., d), each row summed alone."""
+        return rows_at(vectors(xi, "xi", self.dim), self.basis)
 
     def projector(self, metric=None) -> np.ndarray:
         """Matrix ``P`` (d, d) of the projection onto the subspace, acting on columns (``P @ x``).
@@ -211,8 +213,8 @@ class Subspace:
         return B.T @ np.linalg.solve(B @ K @ B.T, B @ K)
 
     def project(self, x, metric=None) -> np.ndarray:
-        """Apply :meth:`projector` to a batch of vectors: (..., d) -> (..., d)."""
-        return np.asarray(x, dtype=float) @ self.projector(metric).T
+        """Apply :meth:`projector` to a batch of vectors: (..., d) -> (..., d), each row summed alone."""
+        return rows_at(vectors(x, "x", self.algebra.dim), self.projector(metric).T)
 
     # ------------------------------------------------------------------ Lie structure
     def _pair_brackets(self, U: np.ndarray, V: np.ndarray) -> np.ndarray:

@@ -131,6 +131,11 @@ class CaseEntry:
 
 
 # ====================================================================== helpers
+def _flag(value, name: str) -> None:
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {type(value).__name__} {value!r}")
+
+
 def _no_int(b):
     raise TypeError(b)  # (int(2.7) would truncate a size silently)
 
@@ -317,6 +322,7 @@ def family3(J, v1: Callable, dv1: Callable, v2: Callable, dv2: Callable, *, chec
         raise ValueError(f"the family case needs J1 != J2 (for J1 = J2 the integral is J1 times the energy), "
                          f"got J1 = J2 = {J[0]}")
     pot = FamilyPotential(v1, dv1, v2, dv2)
+    _flag(check, "check")
     if check:
         check_gradient(pot, raise_error=True, tol=1e-5)
     system = _system3(J, pot)
@@ -506,6 +512,7 @@ def klebsh_tisserand(I, B, *, allow_general: bool = False) -> Case:
     B = as_float_array(B, "B")
     if B.shape != (n,):
         raise ValueError(f"B must have shape ({n},) for I of length {n}, got {B.shape}")
+    _flag(allow_general, "allow_general")
     if not allow_general and np.any(B[:-1] <= B[-1]):
         bad = int(np.argmax(B[:-1] <= B[-1])) + 1
         raise ValueError(f"B: the Klebsh–Tisserand tori need B_i > B_n for every i < n, got B_{bad} = "
