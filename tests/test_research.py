@@ -609,10 +609,11 @@ def test_poincare_section_reports_failures_and_not_its_start():
         ls.poincare_section(system, X[:2], (0.0, 5.0), lambda t, O, G, g: None)
     with pytest.raises(ValueError, match="returned NaN"):
         ls.poincare_section(system, X[:2], (0.0, 5.0), lambda t, O, G, g: np.full(np.shape(t), np.nan))
-    with pytest.raises(ValueError, match="conflicts with direction"):
-        ls.poincare_section(system, X[:2], (0.0, 5.0), ls.integrators.LinearEvent(omega=[0, 1, 0], direction=-1))
-    with pytest.raises(ValueError, match="section is terminal"):
-        ls.poincare_section(system, X[:2], (0.0, 5.0), ls.integrators.LinearEvent(omega=[0, 1, 0], terminal=True))
+    # the section is a surface: its own direction and terminal are not read (API.md reuses an event this way)
+    up = ls.poincare_section(system, X[:2], (0.0, 20.0), plane(omega=[0.0, 1.0, 0.0]))
+    own = ls.poincare_section(system, X[:2], (0.0, 20.0),
+                              ls.integrators.LinearEvent(omega=[0, 1, 0], direction=-1, terminal=True))
+    assert up.t.size > 2 and np.array_equal(up.t, own.t)
 
 
 def test_lyapunov_is_shift_invariant_and_refuses_rounding_level_settings():

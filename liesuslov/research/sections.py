@@ -65,7 +65,9 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
         section is called with ``g=None`` without ``g0``: one that reads g raises a ValueError telling to
         pass ``g0`` (e.g. ``np.eye(n)``).
     direction : {1, -1, 0}
-        Crossings from ``section < 0`` to ``> 0`` (1), the reverse (-1), or both (0).
+        Crossings from ``section < 0`` to ``> 0`` (1), the reverse (-1), or both (0). The section is used as a
+        surface: its own ``direction`` and ``terminal`` attributes (an event of ``integrate`` reused here) are
+        not read — this argument decides, and every crossing over ``t_span`` is collected.
     **options
         ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``.
 
@@ -86,13 +88,6 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
     if not callable(section):
         raise TypeError(f"section must be a callable section(t, Omega, Gamma, g) or a linear event (ls.research."
                         f"plane(...)), got {type(section).__name__}")
-    if getattr(section, "terminal", False):
-        raise ValueError("section is terminal: poincare_section collects every crossing over t_span; pass a "
-                         "section with terminal=False (or integrate(..., events=[...]) to stop at one)")
-    own = getattr(section, "direction", 0)
-    if own not in (0, direction):
-        raise ValueError(f"section.direction = {own!r} conflicts with direction={direction!r}: pass the direction "
-                         "you want as direction= (the section's own is then 0 or the same)")
     t0, t1 = R.check_span(t_span)
     opts = R.options_with_defaults(options)
     b = R.prepare(system, Omega0, Gamma0, g0)
