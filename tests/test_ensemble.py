@@ -625,6 +625,7 @@ def test_an_executor_that_cannot_run_is_bad_input():
 
 
 @pytest.mark.slow
+@pytest.mark.filterwarnings("ignore:Port 8787 is already in use")  # (the module's cluster holds it)
 def test_dask_client_closed_or_without_workers(monkeypatch):
     """A closed client is bad input; a client closed mid-run fails the remaining chunks (it raised the client's
     ClosedClientError from the clean-up); a cluster scaled to no worker waits for one and warns once."""
