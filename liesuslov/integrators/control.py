@@ -32,8 +32,8 @@ import math
 import numpy as np
 
 __all__ = ["SAFETY", "MIN_FACTOR", "MAX_FACTOR", "select", "scale", "combine", "accept_factor", "reject_factor",
-           "initial_step", "probe_step", "step_floor", "fixed_steps", "crossed", "secant_point", "illinois_update",
-           "closest_end", "bracket_closed"]
+           "initial_step", "probe_step", "ulp", "underflow", "step_floor", "fixed_steps", "crossed", "secant_point",
+           "illinois_update", "closest_end", "bracket_closed"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 # Added under the square root of DOP853's combination so that S5 = S3 = 0 gives 0, not 0/0 (it changes
@@ -87,11 +87,20 @@ def initial_step(d0, d1, d2, h0, order):
     return select(h > 0.0, h, 0.0)
 
 
+def ulp(t, direction):
+    """The spacing of the floats at ``t`` in the direction of integration: ``|nextafter(t, direction inf) - t|``."""
+    return np.abs(np.nextafter(t, direction * np.inf) - t)
+
+
+def underflow(h, t, direction):
+    """The step ``h`` is below ten ulps of ``t``: it no longer moves t by its size (the run fails there)."""
+    return np.abs(h) < 10.0 * ulp(t, direction)
+
+
 def step_floor(t0, t1):
-    """Ten ulps of the largest ``|t|`` of the span: a step below it no longer moves ``t`` by its size somewhere
-    in the span (a fixed step below it fails at once, an adaptive one is tested against its own ``t``)."""
-    big = max(abs(t0), abs(t1))
-    return 10.0 * (np.nextafter(big, np.inf) - big)
+    """Ten ulps of the largest ``|t|`` of the span: a step above it passes :func:`underflow` at every t of the
+    span (a fixed step below it fails at once; an adaptive one is tested against its own t)."""
+    return 10.0 * ulp(max(abs(t0), abs(t1)), 1.0)
 
 
 def fixed_steps(span, h, cap):
@@ -152,5 +161,4 @@ def closest_end(lo, hi, vlo, vhi):
 def bracket_closed(t, h, lo, hi, c, direction):
     """The bracket ``[lo, hi]`` of theta spans at most 4 ulps of the time ``t + c h`` (a step of size ``h`` from
     ``t``, integrating in ``direction``): the root is located to rounding in t."""
-    tc = t + c * h
-    return np.abs(h) * (hi - lo) <= 4.0 * np.abs(np.nextafter(tc, direction * np.inf) - tc)
+    return np.abs(h) * (hi - lo) <= 4.0 * ulp(t + c * h, direction)

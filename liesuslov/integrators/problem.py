@@ -39,6 +39,7 @@ FAILURES = {
        "t_span nearer 0)",
 }
 
+
 def run_message(status: np.ndarray, t_stop: np.ndarray, failure: np.ndarray | None) -> str:
     """The message of a run from its per-trajectory ``status``, ``t_stop`` and ``failure`` codes (flat, (B,)):
     the first failure with its reason and time, else how many a terminal event stopped, else success. One

@@ -330,7 +330,7 @@ class _Solve:
             self._fail(live & (self.steps + self.rejected >= P.max_steps), 3, t)
         self.tries += 1
         if P.adaptive and self.h_abs.min() < self.h_floor:  # below ten ulps of t the step no longer moves t
-            self._fail(live & (self.h_abs < 10 * np.abs(np.nextafter(t, direction * np.inf) - t)), 2, t)
+            self._fail(live & control.underflow(self.h_abs, t, direction), 2, t)
         n_live = int(np.count_nonzero(live))
         if n_live == 0:
             return

@@ -81,6 +81,13 @@ def _jit_entry(fn):
     return _jit(fn, entry=True)
 
 
+@overload(control.ulp)
+def _ulp_scalar(t, direction):
+    """:func:`control.ulp` as it stands, for the compiled formulas that call it (underflow, step_floor,
+    bracket_closed): numba resolves a call of a module-level Python function only through an overload."""
+    return control.ulp
+
+
 @overload(control.select, inline="always")
 def _select_scalar(cond, a, b):
     """:func:`control.select` on scalars, as the compiled formulas below call it.
@@ -154,6 +161,7 @@ _accept_factor = _jit(control.accept_factor)
 _reject_factor = _jit(control.reject_factor)
 _initial_step = _jit(control.initial_step)
 _probe_step = _jit(control.probe_step)
+_underflow = _jit(control.underflow)
 _step_floor = _jit(control.step_floor)
 _fixed_steps = _jit(control.fixed_steps)
 _crossed = _jit(control.crossed)

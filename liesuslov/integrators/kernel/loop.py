@@ -59,6 +59,7 @@ from .common import (
     _scale,
     _secant_point,
     _step_floor,
+    _underflow,
     _view,
 )
 from .group import _alg_act, _alg_dinv, _alg_sq, _alg_state, _alg_update, _field, _field_call, _omega_alg
@@ -66,11 +67,6 @@ from .maps import _PI2, _polar_step
 
 
 # ====================================================================================== one trajectory
-@_jit
-def _ulp(t, direction):
-    return abs(np.nextafter(t, direction * np.inf) - t)
-
-
 @_jit
 def _finite(x):
     """Every entry of x is finite (the start of a trajectory; each step folds its test into its own loops)."""
@@ -608,7 +604,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                 fail = 3
                 break
             if adaptive:
-                if abs(h) < 10.0 * _ulp(t, direction):
+                if _underflow(h, t, direction):
                     fail = 2
                     break
                 last = abs(h) >= abs(t1 - t)
