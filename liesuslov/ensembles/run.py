@@ -211,7 +211,9 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     started = time.perf_counter()
     collected: dict[str, Any] = {"arrays": None, "status": np.full(B, -1, dtype=np.int64), "t": None,
                                  "tails": None, "meta": None, "stats": [], "failed": [], "retries": 0,
-                                 "traj_stats": {}, "events": []}
+                                 "traj_stats": {}, "events": [],
+                                 # what the run's message reads, whatever the store (16 bytes a trajectory)
+                                 "ends": {"t_stop": np.full(B, np.nan), "failure": np.zeros(B, dtype=np.int64)}}
     try:
         _run_all(executor, make_task, bounds, retries, max_in_flight, collected, root, bar)
     finally:
@@ -227,8 +229,7 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
         message = (f"{len(collected['failed'])} of {len(bounds)} chunks failed (status -1): "
                    f"{collected['failed'][0]['error']}")
     else:  # the whole batch's, as one integrate call would say it (not one chunk's)
-        ends = collected.get("ends") or collected["traj_stats"]
-        message = run_message(collected["status"], ends.get("t_stop", np.full(B, np.nan)), ends.get("failure"))
+        message = run_message(collected["status"], collected["ends"]["t_stop"], collected["ends"]["failure"])
     t_out = collected["t"] if collected["t"] is not None else (t_eval[-1:] if reduce == "final" else t_eval)
     tails = collected["tails"] if collected["tails"] is not None else _fallback_tails(system, init, sampler, options)
     ev = options.get("events")
@@ -259,20 +260,21 @@ def _run_all(executor, make_task, bounds, retries, max_in_flight, collected, roo
     attempts: dict[int, int] = {}
     pending: dict[Any, int] = {}
 
-    submitted = [False]
+    submitted = False
 
     def submit(i: int) -> None:
+        nonlocal submitted
         try:
             pending[_submit(executor, make_task(i), attempts.get(i, 0))] = i
         except _USER_ERRORS:
             raise
         except Exception as exc:  # noqa: BLE001 - a broken pool refuses submissions: count as a failed attempt
-            if not submitted[0]:  # refused from the start: the executor itself is unusable (bad input)
+            if not submitted:  # refused from the start: the executor itself is unusable (bad input)
                 raise ValueError(f"executor: {type(executor).__name__} refused the first chunk "
                                  f"({type(exc).__name__}: {exc}); pass a running executor") from exc
             fail(i, exc)
         else:
-            submitted[0] = True
+            submitted = True
 
     def fail(i: int, exc: BaseException | None, error: str | None = None) -> None:
         attempts[i] = attempts.get(i, 0) + 1
@@ -348,8 +350,8 @@ def _collect(i: int, bound, payload: dict, collected: dict, root: Path | None) -
                                                  np.full(B, np.nan if v.dtype.kind == "f" else 0, dtype=v.dtype))
             if root is None:
                 collected["traj_stats"][name][a:b] = v
-            elif name in ("t_stop", "failure"):  # for the run's message (16 bytes a trajectory, as status)
-                collected.setdefault("ends", {}).setdefault(name, np.zeros(B, dtype=v.dtype))[a:b] = v
+            if name in collected["ends"]:
+                collected["ends"][name][a:b] = v
     if root is not None:
         _write_shard(root, i, payload)
         return

@@ -408,7 +408,8 @@ def _solution(raw: RawResult, P: Problem, batch_shape, method, chart, wall, reas
                                    Gamma=None if Ge is None else Ge[:, 0], g=None if ge is None else ge[:, 0],
                                    n=model.n, algebra_name=model.algebra.name))
     return Solution(t=np.asarray(raw.t, dtype=float), xi=xi, omega=omega, Gamma=Gamma, g=g, stats=stats,
-                    status=status, message=_message(raw), n=model.n, algebra_name=model.algebra.name,
+                    status=status, message=run_message(raw.status, raw.t_stop, raw.failure),
+                    n=model.n, algebra_name=model.algebra.name,
                     events=records)
 
 
@@ -446,10 +447,6 @@ def _group_arrays(P: Problem, G: np.ndarray, lead: tuple, which):
     if P.mode == "gamma":
         return None, G.reshape(lead + (P.q,))
     return None, None
-
-
-def _message(raw: RawResult) -> str:
-    return run_message(raw.status, raw.t_stop, raw.failure)
 
 
 class _Replay:

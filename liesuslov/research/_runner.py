@@ -23,6 +23,15 @@ from ..integrators.problem import run_message
 DEFAULT_OPTIONS = {"method": "rkmk853", "rtol": 1e-10, "atol": 1e-12}
 
 
+def adaptive(method) -> bool | None:
+    """Whether ``method`` (a name of :data:`~liesuslov.integrators.METHODS`) is adaptive; None if it is not one
+    (integrate then names it in its error)."""
+    from ..integrators import METHODS
+
+    meth = METHODS.get(method) if isinstance(method, str) else None
+    return None if meth is None else meth.adaptive
+
+
 def options_with_defaults(options: dict) -> dict:
     """The integrator options of a research tool: the contract's defaults unless any option is given.
 
@@ -33,10 +42,7 @@ def options_with_defaults(options: dict) -> dict:
         opts.update(DEFAULT_OPTIONS)
     else:
         opts.setdefault("method", DEFAULT_OPTIONS["method"])
-    from ..integrators import METHODS
-
-    meth = METHODS.get(opts["method"]) if isinstance(opts["method"], str) else None
-    if meth is not None and not meth.adaptive and opts.get("h") is None:
+    if adaptive(opts["method"]) is False and opts.get("h") is None:
         raise ValueError(f"h (the step size) is required by the fixed-step method {opts['method']!r}; pass h=..., "
                          "or leave method out to use the adaptive default rkmk853")
     for bad in ("t_eval", "events", "dense_output", "reconstruct"):
@@ -326,12 +332,9 @@ def tight_options(opts: dict) -> dict | None:
     The user's other options (``chart``, ``form``, ``max_steps``, ...) are kept; ``h`` and ``first_step`` are
     dropped (the adaptive method chooses its steps).
     """
-    from ..integrators import METHODS
-
-    meth = METHODS.get(opts["method"]) if isinstance(opts.get("method"), str) else None
-    adaptive = meth is not None and meth.adaptive
-    rtol = min(TIGHT["rtol"], float(opts.get("rtol", 1.0))) if adaptive else TIGHT["rtol"]
-    atol = min(TIGHT["atol"], float(opts.get("atol", 1.0))) if adaptive else TIGHT["atol"]
+    own = adaptive(opts.get("method")) is True
+    rtol = min(TIGHT["rtol"], float(opts.get("rtol", 1.0))) if own else TIGHT["rtol"]
+    atol = min(TIGHT["atol"], float(opts.get("atol", 1.0))) if own else TIGHT["atol"]
     if opts.get("method") == TIGHT["method"] and float(opts.get("rtol", 1e-8)) <= rtol \
             and float(opts.get("atol", 1e-10)) <= atol and "h" not in opts and "first_step" not in opts:
         return None

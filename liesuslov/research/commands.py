@@ -43,13 +43,13 @@ def add_phase_arguments(p) -> None:
 
 def _options(scene) -> dict[str, Any]:
     """The scene's integrator options, or the research defaults for a fixed-step scene without h."""
-    from ..integrators import METHODS
+    from ._runner import adaptive
 
-    meth = METHODS.get(scene.method)
-    if meth is not None and not meth.adaptive and scene.h is None:
+    own = adaptive(scene.method)
+    if own is False and scene.h is None:
         return {}
     opts: dict[str, Any] = {"method": scene.method, "chart": scene.chart}
-    if meth is not None and meth.adaptive:
+    if own:
         opts.update(rtol=min(scene.rtol, 1e-10), atol=min(scene.atol, 1e-12))
     else:
         opts["h"] = scene.h

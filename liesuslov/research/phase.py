@@ -313,7 +313,7 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
     closure = np.full(B, np.nan)
     count = np.zeros(B, dtype=int)
     want_axes = m == 3 and system.is_so
-    why = np.full(B, "", dtype=object)  # integrate's reason for a failed trajectory
+    why = np.full(B, "", dtype=object)  # why a trajectory failed (integrate's reason) or has no period
     if period is None:
         _search(system, b, s0, scale, return_tol, screen, t_max, opts, tight, T, Rm, Rt, status, dist, closure,
                 count, why, on_failure == "raise")
@@ -359,10 +359,7 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
 
 def _screen(opts: dict) -> float:
     """The candidate tolerance of the search's own integration: ``min(1e-2, 1e4 rtol)``, 1e-2 for fixed step."""
-    from ..integrators import METHODS
-
-    meth = METHODS.get(opts["method"]) if isinstance(opts.get("method"), str) else None
-    if meth is None or not meth.adaptive:
+    if not R.adaptive(opts.get("method")):
         return 1e-2
     return min(1e-2, 1e4 * float(opts.get("rtol", 1e-8)))
 
