@@ -29,11 +29,12 @@ def rows_at(x, M) -> np.ndarray:
     return np.einsum("...i,i->..." if np.ndim(M) == 1 else "...i,ij->...j", x, M)
 
 
-def vectors(x, name: str, size: int) -> np.ndarray:
-    """``x`` as a float array of vectors (..., size), or a ``ValueError`` naming it — the check of the batch
-    methods of the algebra layer (numpy's IndexError or broadcasting message named neither the argument nor
-    the size it needs)."""
+def vectors(x, name: str, size: int, owner: object = None) -> np.ndarray:
+    """``x`` as a float array of vectors (..., size), or a ``ValueError`` naming it (and ``owner``, e.g. the
+    algebra) — the check of the batch methods of the algebra layer (numpy's IndexError or broadcasting
+    message named neither the argument nor the size it needs)."""
     x = np.asarray(x, dtype=float)
     if x.shape[-1:] != (size,):
-        raise ValueError(f"{name} must have shape (..., {size}), got {x.shape}")
+        where = "" if owner is None else f" for {owner}"
+        raise ValueError(f"{name} must have shape (..., {size}){where}, got {x.shape}")
     return x

@@ -111,8 +111,8 @@ class LieAlgebra:
         -------
         ndarray, shape (..., d)
         """
-        x = vectors(x, "x", self._dim)
-        y = vectors(y, "y", self._dim)
+        x = vectors(x, "x", self._dim, self.name)
+        y = vectors(y, "y", self._dim, self.name)
         return np.einsum("...j,...jk->...k", y, self._contract(x))
 
     def ad(self, x) -> np.ndarray:
@@ -126,7 +126,7 @@ class LieAlgebra:
         -------
         ndarray, shape (..., d, d), ``ad(x)[..., k, j] = sum_i x_i C[i, j, k]``.
         """
-        return np.swapaxes(self._contract(vectors(x, "x", self._dim)), -1, -2)
+        return np.swapaxes(self._contract(vectors(x, "x", self._dim, self.name)), -1, -2)
 
     def _contract(self, x: np.ndarray) -> np.ndarray:
         """``sum_i x_i C[i, j, k]``, shape (..., d, d) from x (..., d): the operations' common first factor.
@@ -153,8 +153,8 @@ class LieAlgebra:
         -------
         ndarray, shape (..., d)
         """
-        x = vectors(x, "x", self._dim)
-        m = vectors(m, "m", self._dim)
+        x = vectors(x, "x", self._dim, self.name)
+        m = vectors(m, "m", self._dim, self.name)
         return np.einsum("...jk,...k->...j", self._contract(x), m)
 
     @cached_property
@@ -198,7 +198,7 @@ class LieAlgebra:
         """
         R = self._require_rep()
         d, m = R.shape[0], R.shape[1]
-        x = vectors(x, "x", d)
+        x = vectors(x, "x", d, self.name)
         return rows_at(x, R.reshape(d, m * m)).reshape(x.shape[:-1] + (m, m))  # (row-exact: not tensordot's BLAS)
 
     def vee(self, X) -> np.ndarray:

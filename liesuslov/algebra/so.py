@@ -88,9 +88,7 @@ class SpecialOrthogonalAlgebra(LieAlgebra):
     # ------------------------------------------------------------------ hat / vee
     def hat(self, x) -> np.ndarray:
         """Coordinates to skew matrices: ``(..., d) -> (..., n, n)``, ``X[i, j] = x_ij``, ``X[j, i] = -x_ij``."""
-        x = np.asarray(x, dtype=float)
-        if x.shape[-1:] != (self._dim,):
-            raise ValueError(f"x must have shape (..., {self._dim}) for {self.name}, got {x.shape}")
+        x = vectors(x, "x", self._dim, self.name)
         X = np.zeros(x.shape[:-1] + (self.n, self.n))
         X[..., self._rows, self._cols] = x
         X[..., self._cols, self._rows] = -x
