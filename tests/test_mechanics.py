@@ -759,3 +759,16 @@ def test_a_potential_returning_a_stacked_array_for_a_pair_is_caught():
                         lambda t, q: np.stack([q, t], -1))
     with pytest.raises(ValueError, match="potential could not be evaluated"):
         SuslovSystem(Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])), potential=p)
+
+
+def test_a_potential_returning_complex_numbers_is_a_type_error():
+    """numpy casts a complex gradient to float with a ComplexWarning, dropping its imaginary part: refused at
+    construction instead, naming which callable."""
+    J = Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0]))
+    complex_grad = Potential(lambda G: G[..., 2], lambda G: (1 + 1j) * G)
+    with pytest.raises(TypeError, match=r"potential\.grad must return real numbers"):
+        SuslovSystem(J, potential=complex_grad)
+    complex_V = Potential(lambda G: 1j * G[..., 2], lambda G: G)
+    with pytest.raises(TypeError, match=r"potential\.V must return real numbers"):
+        SuslovSystem(J, potential=complex_V)
+    SuslovSystem(J, potential=Potential(lambda G: G[..., 2] > 0, lambda G: 0 * G))  # booleans are numbers

@@ -25,6 +25,17 @@ __all__ = ["Potential", "ZeroPotential", "LinearPotential", "QuadraticPotential"
            "GradientCheck", "check_gradient"]
 
 
+def real_values(value, label: str) -> np.ndarray:
+    """``value`` as a float array; a complex (or object) result of a user callable is a TypeError.
+
+    numpy would cast it with a ComplexWarning and drop the imaginary part: a potential meant differently."""
+    array = np.asarray(value)
+    if array.dtype.kind not in "biuf":
+        raise TypeError(f"{label} must return real numbers: got dtype {array.dtype}; return the real part if "
+                        f"that is the potential meant")
+    return array.astype(float, copy=False)
+
+
 class Potential:
     """A potential ``V(Gamma)`` from user callables.
 
@@ -72,11 +83,11 @@ class Potential:
 
     def V(self, Gamma) -> np.ndarray:
         """Value ``V(Gamma)``: (..., n) -> (...)."""
-        return np.asarray(self._V(np.asarray(Gamma, dtype=float)), dtype=float)
+        return real_values(self._V(np.asarray(Gamma, dtype=float)), "potential.V")
 
     def grad(self, Gamma) -> np.ndarray:
         """Gradient ``dV/dGamma``: (..., n) -> (..., n)."""
-        return np.asarray(self._grad(np.asarray(Gamma, dtype=float)), dtype=float)
+        return real_values(self._grad(np.asarray(Gamma, dtype=float)), "potential.grad")
 
     def check_gradient(self, Gamma=None, **options) -> GradientCheck:
         """Shortcut for :func:`check_gradient` ``(self, Gamma, **options)``."""
@@ -222,14 +233,14 @@ class FamilyPotential(Potential):
         G = np.asarray(Gamma, dtype=float)
         g1, g2, g3 = G[..., 0], G[..., 1], G[..., 2]
         s3 = g3 * g3
-        return np.asarray(self.v1(g1, g2 * g2 + s3) + self.v2(g2, g1 * g1 + s3), dtype=float)
+        return real_values(self.v1(g1, g2 * g2 + s3) + self.v2(g2, g1 * g1 + s3), "v1 + v2")
 
     def grad(self, Gamma) -> np.ndarray:
         G = np.asarray(Gamma, dtype=float)
         g1, g2, g3 = G[..., 0], G[..., 1], G[..., 2]
         s3 = g3 * g3
-        v1s, v1r = self.dv1(g1, g2 * g2 + s3)
-        v2t, v2q = self.dv2(g2, g1 * g1 + s3)
+        v1s, v1r = (real_values(d, "dv1") for d in self.dv1(g1, g2 * g2 + s3))
+        v2t, v2q = (real_values(d, "dv2") for d in self.dv2(g2, g1 * g1 + s3))
         out = np.empty(np.broadcast_shapes(G.shape, np.shape(v1s) + (3,), np.shape(v2t) + (3,)))
         out[..., 0] = v1s + 2.0 * g1 * v2q
         out[..., 1] = 2.0 * g2 * v1r + v2t

@@ -27,7 +27,7 @@ from .._validation import as_float_array, check_real
 from ..algebra import Inertia, SpecialOrthogonalAlgebra, Subspace, omega_coordinates, suslov_distribution
 from .forces import gyroscopic_torque, wedge_coordinates
 from .models import Model, build_model
-from .potentials import Potential, ZeroPotential
+from .potentials import Potential, ZeroPotential, real_values
 
 __all__ = ["SuslovSystem", "FORMS", "Reaction", "wedge_coordinates", "gyroscopic_torque"]
 
@@ -408,10 +408,11 @@ def _probe_potential(potential: Potential, n: int) -> None:
     G[:, 0, -1] = 1.0
     shape = f"(3, 1, {n})"
     try:
-        V = np.asarray(potential.V(G))
-        g = np.asarray(potential.grad(G))
-    except Exception as exc:  # noqa: BLE001 - re-raised with the context
-        raise ValueError(f"potential could not be evaluated on Gamma of shape {shape}: {exc}") from exc
+        V = real_values(potential.V(G), "potential.V")
+        g = real_values(potential.grad(G), "potential.grad")
+    except Exception as exc:  # noqa: BLE001 - re-raised with the context, a wrong type as a TypeError
+        kind = TypeError if isinstance(exc, TypeError) else ValueError
+        raise kind(f"potential could not be evaluated on Gamma of shape {shape}: {exc}") from exc
     if V.shape != (3, 1):
         raise ValueError(f"potential.V must map (..., {n}) to (...): got shape {V.shape} for input {shape}")
     if g.shape != (3, 1, n):
