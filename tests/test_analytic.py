@@ -374,19 +374,34 @@ def test_kharlamova_coordinates_integrals_and_time_of():
     np.testing.assert_allclose(E - E[0], 0.0, atol=1e-10)
     om_t, _ = kharlamova_coordinates(u, G, I, B)
     np.testing.assert_allclose(om_t[:, 1:] - om_t[0, 1:], 0.0, atol=1e-10)      # (4.7): omega_i' = 0
-    # t(omega_1) = int d w / sqrt(P4) by plain quadrature inside the interval
-    km = KharlamovaMotion(u0[0], G0[0], I, B)
-    xi1, xi2 = km.bracket
-    w0 = float(km.omega1_0)
-    P4 = km.quartic
-    for w in (xi1 + 0.3 * (xi2 - xi1), w0 + 0.4 * (xi2 - w0)):
-        ref = quad(lambda x: 1.0 / np.sqrt(np.polyval(P4, x)), w0, w, epsabs=1e-14, epsrel=1e-13)[0]
-        np.testing.assert_allclose(km.time_of(w), ref, rtol=1e-11)
-    # from xi1 to xi2 is half a period (at the ends t(w) ~ sqrt(w - xi): the rounding of w shows at 1e-8)
-    np.testing.assert_allclose(km.time_of(xi2) - km.time_of(xi1), 0.5 * km.period, rtol=1e-7)
-    if G0[0, -1] > 0.0:   # going up: omega_1(t(w)) = w
-        w = w0 + 0.5 * (xi2 - w0)
-        np.testing.assert_allclose(km.omega1(km.time_of(w)), w, atol=1e-12)
+    # t(omega_1) = int d w / (+-sqrt(P4)) by plain quadrature inside the interval, the sign of Gamma_n(0);
+    # both signs of Gamma_n(0) (the time-reversed start) and the two turning points as starts
+    for G0n in (G0[0], G0[0] * np.r_[np.ones(n - 1), -1.0]):
+        km = KharlamovaMotion(u0[0], G0n, I, B)
+        xi1, xi2 = km.bracket
+        w0 = float(km.omega1_0)
+        P4 = km.quartic
+        sign = np.sign(G0n[-1])
+        for w in (xi1 + 0.3 * (xi2 - xi1), w0 + 0.4 * (xi2 - w0), w0 - 0.4 * (w0 - xi1)):
+            ref = quad(lambda x: 1.0 / np.sqrt(np.polyval(P4, x)), w0, w, epsabs=1e-14, epsrel=1e-13)[0]
+            np.testing.assert_allclose(km.time_of(w), sign * ref, rtol=1e-11)
+            np.testing.assert_allclose(km.omega1(km.time_of(w)), w, atol=1e-12)
+        # from xi1 to xi2 is half a period (at the ends t(w) ~ sqrt(w - xi): the rounding of w shows at 1e-8)
+        np.testing.assert_allclose(sign * (km.time_of(xi2) - km.time_of(xi1)), 0.5 * km.period, rtol=1e-7)
+        for t_turn in (km.time_of(xi1), km.time_of(xi2)):
+            # a start within rounding of a turning point (Gamma_n ~ 1e-17 at the top): its root of P4 near 0
+            # came out on either side of 0 and gave a bracket [0, 0]; the motion is the same one shifted
+            u_turn, G_turn = km.state(t_turn)
+            near = KharlamovaMotion(u_turn, G_turn, I, B)
+            ts = np.linspace(-3.0, 3.0, 7)
+            for a, b in zip(near.state(ts), km.state(t_turn + ts)):
+                np.testing.assert_allclose(a, b, atol=1e-12)
+            # exactly on it (Gamma_n = 0): every value of the bracket is ahead
+            G_turn[-1] = 0.0
+            turn = KharlamovaMotion(u_turn, G_turn / np.linalg.norm(G_turn), I, B)
+            w = np.mean(turn.bracket)
+            assert turn.time_of(w) > 0.0
+            np.testing.assert_allclose(turn.omega1(turn.time_of(w)), w, atol=1e-12)
 
 
 def test_kharlamova_asymptotic_motion():

@@ -249,6 +249,16 @@ class KharlamovaMotion:
         comp[:, :, -1] = -px[:, :4] / px[:, 4:5]
         roots = np.linalg.eigvals(comp)
         scale = np.maximum(1.0, np.max(np.abs(roots), axis=-1))
+        # A start near a turning point (Gamma_n(0) ~ 1e-8 or less): the root near 0, -P(0)/P'(0) = -Gamma_n^2/p1
+        # to first order, is below the eigenvalues' rounding and may come out on the wrong side of 0 (a bracket
+        # [0, 0]); its first-order value has the right side and is exact to (Gamma_n^2/p1)^2. Only for a
+        # simple root (|p2 r| << |p1|): near a separatrix the root is one of a close pair.
+        i0 = np.argmin(np.abs(roots), axis=-1)
+        p1 = px[:, 1]
+        linear = -px[:, 0] / np.where(p1 != 0.0, p1, 1.0)
+        tiny = ((np.abs(roots[np.arange(nb), i0]) <= 16.0 * np.finfo(float).eps * scale) & (p1 != 0.0)
+                & (np.abs(px[:, 2] * linear) <= 1e-3 * np.abs(p1)))
+        roots[np.arange(nb)[tiny], i0[tiny]] = linear[tiny]
         realish = np.abs(roots.imag) <= self._tol * scale[:, None]
         re = roots.real
         # Near a separatrix a complex pair of P approaches the real axis (imaginary part ~ the distance
@@ -260,10 +270,8 @@ class KharlamovaMotion:
         P_noise = 64.0 * np.finfo(float).eps * _polyval_asc(np.abs(px)[:, None, :], np.abs(re))
         realish &= (roots.imag == 0.0) | (P_re <= P_noise)
         Gn0 = G0[:, -1]
-        p1 = px[:, 1]
         equilibrium = (np.abs(Gn0) <= 1e-15) & (np.abs(p1) <= 1e-14 * (1.0 + np.linalg.norm(u0, axis=-1)))
         # choose xi1 <= 0 <= xi2 (a root at 0 when Gamma_n = 0 is the end the motion leaves from)
-        i0 = np.argmin(np.abs(roots), axis=-1)
         at_zero = (Gn0 == 0.0) & ~equilibrium
         cand_lo = np.where(realish & (re <= 0.0), re, -np.inf)
         cand_hi = np.where(realish & (re >= 0.0), re, np.inf)
@@ -347,8 +355,10 @@ class KharlamovaMotion:
         th0 = np.arctan2(np.sqrt(np.clip(-a1 / w, 0.0, 1.0)), np.sqrt(np.clip(a2 / w, 0.0, 1.0)))
         t0 = self._t_of_theta(th0, np.arange(nb))
         gn0 = ref * Gn0
-        at_lo = (a1 == 0.0)
-        self._tau0 = np.where(equilibrium, 0.0, np.where((gn0 > 0.0) | at_lo, t0, -t0))
+        at_lo, at_hi = (a1 == 0.0), (a2 == 0.0)
+        # +1 when x' increases right after t = 0 (Gamma_n' > 0, or at the lower turning point), else -1
+        self._ascending = np.where(at_lo | ((gn0 > 0.0) & ~at_hi), 1.0, -1.0)
+        self._tau0 = np.where(equilibrium, 0.0, self._ascending * t0)
         self._roots_x = roots
 
     # --------------------------------------------------------------------------------- elliptic core
@@ -433,7 +443,11 @@ class KharlamovaMotion:
 
     # ------------------------------------------------------------------------------------ evaluation
     def time_of(self, omega1: Any) -> np.ndarray:
-        r"""``t(omega_1) = int_{omega_1(0)}^{omega_1} dw / sqrt(P4(w))`` (signed), the paper's integral.
+        r"""The time ``t`` with ``omega_1(t) = omega1`` on the arc of the motion through ``t = 0``.
+
+        ``t = int_{omega_1(0)}^{omega1} dw / (s sqrt(P4(w)))``, the paper's quadrature with its sign ``s``
+        that of ``Gamma_n(0)`` (``omega_1' = Gamma_n``): the arc runs between the turning points before and
+        after ``t = 0`` (at a turning point, from it), on which ``omega_1`` is monotone.
 
         Parameters
         ----------
@@ -443,8 +457,8 @@ class KharlamovaMotion:
         Returns
         -------
         ndarray
-            The time to reach ``omega1`` from ``omega_1(0)`` along the branch ``Gamma_n >= 0`` (when
-            ``omega1 >= omega_1(0)``) or ``<= 0`` (going down); negative for ``omega1 < omega_1(0)``.
+            Positive when the motion reaches ``omega1`` after ``t = 0``, negative when it passed it before;
+            ``|t| <= period / 2``. ``omega1(time_of(w)) == w``.
         """
         w = C.as_array(omega1, "omega1")
         shape = np.broadcast_shapes(w.shape, self.batch_shape)
@@ -463,7 +477,7 @@ class KharlamovaMotion:
         th = np.arctan2(np.sqrt(np.clip((xr - a1) / wdt, 0.0, 1.0)),
                         np.sqrt(np.clip((a2 - xr) / wdt, 0.0, 1.0)))
         th0 = np.arctan2(np.sqrt(np.clip(-a1 / wdt, 0.0, 1.0)), np.sqrt(np.clip(a2 / wdt, 0.0, 1.0)))
-        out = F["ref"][k] * (self._t_of_theta(th, k) - self._t_of_theta(th0, k))
+        out = self._ascending[k] * (self._t_of_theta(th, k) - self._t_of_theta(th0, k))
         out = np.where(F["eq"][k], 0.0, out)
         return out.reshape(shape)
 
