@@ -836,3 +836,21 @@ def test_batch_methods_name_a_wrong_shape():
             call()
     with pytest.raises(TypeError, match="name must be a string"):
         ls.LieAlgebra(ls.so(3).structure_constants, name=5)
+
+
+def test_a_3x3_omega_near_a_skew_matrix_is_refused_on_so3_not_read_as_three_vectors():
+    """On so(3) d = m = 3: a (3, 3) array off skew by 1e-11 was read as three coordinate vectors (energy gave
+    three values; integrate said 'not in D'); on so(4) the same defect is a clear error."""
+    from liesuslov.algebra import omega_coordinates
+    alg = ls.so(3)
+    X = alg.hat(np.array([0.3, -0.2, 0.5]))
+    np.testing.assert_array_equal(omega_coordinates(alg, X + 1e-14 * np.eye(3)), alg.vee(X + 1e-14 * np.eye(3)))
+    near = X.copy()
+    near[0, 1] += 1e-11
+    with pytest.raises(ValueError, match=r"Omega of shape \(3, 3\).*ambiguous"):
+        omega_coordinates(alg, near)
+    vectors = np.arange(9.0).reshape(3, 3)
+    np.testing.assert_array_equal(omega_coordinates(alg, vectors), vectors)
+    free = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])), constraints="none")
+    with pytest.raises(ValueError, match="Omega0 of shape"):
+        ls.integrate(free, near, (0.0, 1.0), h=0.1)

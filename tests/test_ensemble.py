@@ -662,3 +662,20 @@ def test_a_batch_beyond_the_memory_is_refused():
     system = _system()
     with pytest.raises(ValueError, match="bookkeeping"):
         ensemble(system, None, T_SPAN, sampler=uniform_sampler, n=10**13, **FIXED)
+
+
+_TAU = np.full((5, 4), 0.5)
+
+
+def _clock_of_the_whole_batch(t, Omega, Gamma, g):
+    return t - _TAU
+
+
+def test_an_event_with_parameters_of_the_whole_batch_names_itself_in_an_ensemble():
+    """integrate calls an event on the batch's shape, an ensemble on a chunk's (chunk,): an event reading a
+    (5, 4) parameter works in integrate and raised numpy's bare broadcast error in ensemble."""
+    system, Omega0, Gamma0 = _initial()
+    sol = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", events=_clock_of_the_whole_batch)
+    assert sol.events[0].t.size == 20
+    with pytest.raises(ValueError, match=r"events\[0\] raised ValueError: .*called on a batch of shape \(20,\)"):
+        ensemble(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", events=_clock_of_the_whole_batch)

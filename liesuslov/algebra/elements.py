@@ -14,8 +14,11 @@ from .._validation import as_float_array
 
 __all__ = ["omega_coordinates", "body_vector", "space_vector"]
 
-#: Relative tolerance (times max(1, max |X|)) for a matrix to count as in the algebra's image.
+#: Relative tolerance (times max |X|) for a matrix to count as in the algebra's image.
 OMEGA_MATRIX_RTOL = 1e-12
+#: Where d == m (so(3), se(2)) an (m, m) array off the image by more than OMEGA_MATRIX_RTOL but less than this
+#: (relative) is refused rather than read as m coordinate vectors: matrices with an error, most likely.
+OMEGA_MATRIX_NEAR = 1e-6
 
 
 def omega_coordinates(algebra, Omega, name: str = "Omega") -> np.ndarray:
@@ -28,8 +31,9 @@ def omega_coordinates(algebra, Omega, name: str = "Omega") -> np.ndarray:
     Omega : array_like, shape (..., m, m) or (..., d)
         An array whose trailing ``(m, m)`` block lies in the image of the representation (skew-symmetric
         on so(n), to ``1e-12 max |Omega|``: relative) is read as matrices, ``vee(Omega)``; otherwise the
-        last axis must be the ``d`` coordinates. On so(3) (``d = m = 3``) a stack of three coordinate
-        vectors that happens to be skew is read as a matrix: pass another batch shape, or matrices.
+        last axis must be the ``d`` coordinates. On so(3) and se(2) (``d = m = 3``) a stack of three
+        coordinate vectors that happens to be skew is read as a matrix, and one within ``1e-6`` (relative) of
+        a matrix is refused as ambiguous: pass another batch shape, or matrices.
     name : str
         The argument's name for the error messages.
 
@@ -42,8 +46,8 @@ def omega_coordinates(algebra, Omega, name: str = "Omega") -> np.ndarray:
     TypeError
         Not a real numeric array (complex values included).
     ValueError
-        Non-finite values; ``(m, m)`` matrices outside the algebra (not skew on so(n)) when ``d != m``;
-        a last axis that is neither.
+        Non-finite values; ``(m, m)`` matrices outside the algebra (not skew on so(n)) when ``d != m``, or
+        near it when ``d == m``; a last axis that is neither.
     """
     X = as_float_array(Omega, name, ndim_min=1)
     d, m = algebra.dim, algebra.matrix_size
@@ -53,11 +57,16 @@ def omega_coordinates(algebra, Omega, name: str = "Omega") -> np.ndarray:
         scale = float(np.max(np.abs(X), initial=0.0))  # relative: a small Omega is tested as a large one
         if np.allclose(algebra.hat(x), X, rtol=0, atol=OMEGA_MATRIX_RTOL * scale):
             return x
+        what = "skew-symmetric" if is_so else f"in the image of {algebra.name}'s representation"
+        defect = float(np.max(np.abs(algebra.hat(x) - X), initial=0.0))
         if X.shape[-1] != d:  # (m, m) could also be m coordinate vectors only when d == m
-            what = "skew-symmetric" if is_so else f"in the image of {algebra.name}'s representation"
-            defect = float(np.max(np.abs(algebra.hat(x) - X)))
             raise ValueError(f"{name} as ({m}, {m}) matrices must be {what} (largest defect {defect:.3g}); "
                              f"or pass coordinates of shape (..., {d})")
+        if defect <= OMEGA_MATRIX_NEAR * scale:  # d == m: matrices off by more than rounding, not vectors
+            raise ValueError(f"{name} of shape {X.shape}: ({m}, {m}) matrices must be {what} to "
+                             f"{OMEGA_MATRIX_RTOL:g} max|{name}| (largest defect {defect:.3g}); {m} coordinate "
+                             f"vectors this close to a matrix of {algebra.name} are ambiguous: pass them with "
+                             f"another batch shape, e.g. (..., {m}, 1, {d})")
     if X.shape[-1] != d:
         shapes = f"(..., {m}, {m}) matrices or " if m is not None else ""
         raise ValueError(f"{name} must be {shapes}(..., {d}) coordinates in {algebra.name}, got shape {X.shape}")

@@ -32,10 +32,11 @@ import math
 import numpy as np
 
 __all__ = ["SAFETY", "MIN_FACTOR", "MAX_FACTOR", "select", "scale", "combine", "accept_factor", "reject_factor",
-           "initial_step", "probe_step", "ulp", "underflow", "step_floor", "fixed_steps", "crossed", "secant_point",
-           "illinois_update", "closest_end", "bracket_closed"]
+           "initial_step", "probe_step", "ulp", "underflow", "step_floor", "fixed_steps", "on_surface_at_start",
+           "crossed", "secant_point", "illinois_update", "closest_end", "bracket_closed"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
+_EPS = float(np.finfo(float).eps)
 # Added under the square root of DOP853's combination so that S5 = S3 = 0 gives 0, not 0/0 (it changes
 # nothing above 1e-284).
 _TINY = 1e-300
@@ -116,6 +117,17 @@ def fixed_steps(span, h, cap):
 def probe_step(d0, d1):
     """The probe step of :func:`initial_step`: ``0.01 d0 / d1``, or 1e-6 when either norm is below 1e-5."""
     return select((d0 < 1e-5) | (d1 < 1e-5), 1e-6, 0.01 * d0 / np.maximum(d1, 1e-300))
+
+
+def on_surface_at_start(value, magnitude, nterms):
+    """A linear event's value at t0: 0 where it is within its rounding of 0, else the value.
+
+    ``magnitude`` is ``|offset| + sum |coef * state|`` and ``nterms`` the number of products: a dot product
+    of that many terms is exact to ``nterms * eps * magnitude`` (plus the state's own few ulps). A plane
+    through the initial state (a return plane) then starts on its surface — not one rounding-level crossing
+    at t ~ 1e-16 on some trajectories, a different set for each solver's order of summation.
+    """
+    return select(np.abs(value) <= (nterms + 4.0) * _EPS * magnitude, 0.0, value)
 
 
 def crossed(old, new, direction):

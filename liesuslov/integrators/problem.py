@@ -179,7 +179,8 @@ class Problem:
         Raises
         ------
         ValueError
-            If the returned values do not broadcast to the batch shape.
+            If the returned values do not broadcast to the batch shape, or the event raised (a TypeError it
+            raised stays one), with what it was called with.
         TypeError
             If they are not real numbers.
         """
@@ -190,7 +191,13 @@ class Problem:
 
         Omega, Gamma, g = self.user_state(xi, G)
         tt = float(t[0]) if shape == () else t.reshape(shape)
-        value = self.events[e](tt, lead(Omega), lead(Gamma), lead(g))
+        try:
+            value = self.events[e](tt, lead(Omega), lead(Gamma), lead(g))
+        except Exception as exc:  # noqa: BLE001 - re-raised naming the event and what it was called with
+            kind = TypeError if isinstance(exc, TypeError) else ValueError
+            raise kind(f"events[{e}] raised {type(exc).__name__}: {exc} (called on a batch of shape {shape}: t "
+                       f"{'a float' if shape == () else f'of shape {shape}'}, Omega of shape {np.shape(lead(Omega))}"
+                       f"; in an ensemble, on one chunk of the flattened batch)") from exc
         raw = np.asarray(value)
         if value is None or raw.dtype.kind not in "biuf":  # None would be NaN, a complex value its real part
             raise TypeError(f"events[{e}] must return real numbers, one per trajectory; got "

@@ -103,13 +103,14 @@ class _Events:
             self.last_t, self.last_xi, self.last_G = np.full(P.B, P.t0), P.xi0.copy(), P.G0.copy()
 
     def values(self, t: np.ndarray, xi: np.ndarray, G: np.ndarray | None, traj: np.ndarray, which=None,
-               accepted: bool = False) -> np.ndarray:
+               accepted: bool = False, start: bool = False) -> np.ndarray:
         """Event values (R, E) — or (R, len(which)) — at times ``t`` (R,) and states of the R distinct
         trajectories ``traj``; ``accepted``: they are accepted points (the trajectories' last points from now on).
 
         A :class:`~.events.LinearEvent` is one stacked dot product per trajectory; a user callable is called
         once, on the whole batch (:meth:`~.problem.Problem.call_event`), with the other trajectories at their
-        last accepted points — so it may use per-trajectory parameters of the batch's shape.
+        last accepted points — so it may use per-trajectory parameters of the batch's shape. ``start``: the
+        values at t0, where a linear event within its rounding of 0 is 0 (:func:`.control.on_surface_at_start`).
         """
         P = self.P
         R = traj.size
@@ -123,6 +124,9 @@ class _Events:
             if lin is not None:
                 coef, off = lin
                 out[:, c] = np.matmul(coef[traj][:, None, :], z[:, :, None])[:, 0, 0] - off[traj]
+                if start:
+                    magnitude = np.abs(off[traj]) + np.sum(np.abs(coef[traj] * z), axis=1)
+                    out[:, c] = control.on_surface_at_start(out[:, c], magnitude, z.shape[1])
                 continue
             if batch is None:
                 T, X, GG = ((self.last_t, self.last_xi, self.last_G) if accepted
@@ -273,7 +277,7 @@ class _Solve:
         live = np.flatnonzero(self.live)
         if self.ev.E:
             self.ev_old[live] = self.ev.values(self.t[live], self.xi[live], self._rows(self.G, live), self.idx[live],
-                                                accepted=True)
+                                                accepted=True, start=True)
         if not P.adaptive:
             self.h_abs[:] = P.h
             if not P.h >= self.h_floor:  # below the resolution of t: the grid would not be t0 + i h
@@ -439,6 +443,8 @@ class _Solve:
             t_new, xi1, h, hit, ev_new = t_new[go], xi1[go], h[go], hit[go], ev_new[go]
             G1 = None if G1 is None else G1[go]
             norm = None if norm is None else norm[go]
+        if out.rec_all and R:  # the step's own end, as an output time there gets it (before any re-projection)
+            out.record(float(t_new[0]), xi1, G1)
         if P.reproject and G1 is not None:
             rp = self.steps[sel] % self.renorm == 0
             if rp.any():
@@ -449,8 +455,6 @@ class _Solve:
         if G1 is not None:
             self.G[sel] = G1
         self.t[sel] = t_new
-        if out.rec_all and R:
-            out.record(float(t_new[0]), xi1, G1)
         if ev.E:
             self.ev_old[sel] = ev_new
         if P.adaptive:

@@ -54,6 +54,7 @@ from .common import (
     _initial_step,
     _jit,
     _jit_entry,
+    _on_surface_at_start,
     _probe_step,
     _reject_factor,
     _scale,
@@ -134,6 +135,19 @@ def _event_values(bi, ev_coef, ev_off, xi, G, out):
         for c in range(G.shape[0]):
             acc += ev_coef[bi, e, k + c] * G[c]
         out[e] = acc
+
+
+@_jit
+def _event_start(bi, ev_coef, ev_off, xi, G, out):
+    """At t0: a value within its rounding of 0 is 0 (:func:`~liesuslov.integrators.control.on_surface_at_start`)."""
+    k = xi.shape[0]
+    for e in range(out.shape[0]):
+        mag = abs(ev_off[bi, e])
+        for c in range(k):
+            mag += abs(ev_coef[bi, e, c] * xi[c])
+        for c in range(G.shape[0]):
+            mag += abs(ev_coef[bi, e, k + c] * G[c])
+        out[e] = _on_surface_at_start(out[e], mag, k + G.shape[0])
 
 
 @_jit
@@ -584,6 +598,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
         if not (_finite(F[0]) and _finite(xi) and _finite(G)):
             fail = 1
         _event_values(bi, ev_coef, ev_off, xi, G, gold)
+        _event_start(bi, ev_coef, ev_off, xi, G, gold)
         h = hfix * direction
         if fail == 0 and adaptive and hfix == 0.0:
             h = _first_step(family, kind, skew, mode, has_g, order, direction, rtol, atol, xi, G, gam, F, xit, Gt, Gam,
@@ -773,12 +788,12 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                 f0_ok = True
             else:
                 f0_ok = False
+            if record:  # the step's own end, as an output time there gets it (before any re-projection)
+                t_rec, xi_rec, G_rec = _record(t_rec, xi_rec, G_rec, rec_n, t, xi, G)
+                rec_n += 1
             if reproj and mode != 0 and nsteps % renorm == 0:
                 f0_ok = False  # the state moved: stage 0 is evaluated again
                 _reproject(mode, G, Wg)
-            if record:
-                t_rec, xi_rec, G_rec = _record(t_rec, xi_rec, G_rec, rec_n, t, xi, G)
-                rec_n += 1
             if adaptive:
                 h = h * _accept_factor(nrm, expo, after_reject)
                 after_reject = False
