@@ -383,7 +383,7 @@ def test_kharlamova_coordinates_integrals_and_time_of():
         P4 = km.quartic
         sign = np.sign(G0n[-1])
         for w in (xi1 + 0.3 * (xi2 - xi1), w0 + 0.4 * (xi2 - w0), w0 - 0.4 * (w0 - xi1)):
-            ref = quad(lambda x: 1.0 / np.sqrt(np.polyval(P4, x)), w0, w, epsabs=1e-14, epsrel=1e-13)[0]
+            ref = quad(lambda x, P4=P4: 1.0 / np.sqrt(np.polyval(P4, x)), w0, w, epsabs=1e-14, epsrel=1e-13)[0]
             np.testing.assert_allclose(km.time_of(w), sign * ref, rtol=1e-11)
             np.testing.assert_allclose(km.omega1(km.time_of(w)), w, atol=1e-12)
         # from xi1 to xi2 is half a period (at the ends t(w) ~ sqrt(w - xi): the rounding of w shows at 1e-8)
@@ -394,7 +394,7 @@ def test_kharlamova_coordinates_integrals_and_time_of():
             u_turn, G_turn = km.state(t_turn)
             near = KharlamovaMotion(u_turn, G_turn, I, B)
             ts = np.linspace(-3.0, 3.0, 7)
-            for a, b in zip(near.state(ts), km.state(t_turn + ts)):
+            for a, b in zip(near.state(ts), km.state(t_turn + ts), strict=True):
                 np.testing.assert_allclose(a, b, atol=1e-12)
             # exactly on it (Gamma_n = 0): every value of the bracket is ahead
             G_turn[-1] = 0.0
