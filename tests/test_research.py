@@ -406,13 +406,13 @@ def _lagrange_quasi_periodic():
 
 
 def test_quasi_periodic_motion_has_no_false_period_at_loose_rtol():
-    """At rtol 1e-6 two of these six trajectories came back within 1e-2 of their start (the old return test):
-    a candidate return must close on the checking re-integration, which these do not (0.8 %, 1.2 %)."""
+    """At rtol 1e-5 two of these six trajectories come back within 1e-2 of their start (the old return test):
+    a candidate return must close on the checking re-integration, which these do not (1.2 %, 0.8 %)."""
     sysm, x0, G = _lagrange_quasi_periodic()
     rows = [0, 3]
     with pytest.raises(ValueError, match="t_max = 1000"):
-        ls.reconstruction_phase(sysm, x0[rows], Gamma0=G[rows], rtol=1e-6, atol=1e-9)
-    ph = ls.reconstruction_phase(sysm, x0[rows], Gamma0=G[rows], rtol=1e-6, atol=1e-9, on_failure="nan")
+        ls.reconstruction_phase(sysm, x0[rows], Gamma0=G[rows], rtol=1e-5, atol=1e-8)
+    ph = ls.reconstruction_phase(sysm, x0[rows], Gamma0=G[rows], rtol=1e-5, atol=1e-8, on_failure="nan")
     assert np.all(ph.status == 1) and np.all(np.isnan(ph.period))
     assert np.all(ph.return_distance <= 1e-2)          # they were candidates ...
     assert np.all(ph.closure > 5e-3)                   # ... that do not close
@@ -566,10 +566,12 @@ def test_near_equilibrium_periods_are_the_least_and_equilibria_are_named():
     time (1e-12 |s0| / speed) and a speed below 1e-12 |s0| is an equilibrium (named; per trajectory with
     on_failure='nan')."""
     J = np.array([1.0, 2.0, 3.0])
-    for eps in (1e-8, 1e-10, 1e-11):  # (the period to ~rtol |s0| / orbit size: 5e-6 relative at eps = 1e-8)
+    for eps in (1e-8, 1e-10, 1e-11):
+        # the least period, not a multiple; its accuracy ~ rtol |s0| / orbit size: 5e-6 relative at eps = 1e-8,
+        # up to 1e-4 below (the orbit is then within 100 atol of the axis)
         w = [eps, eps / 2, 1.0]
         ph = ls.reconstruction_phase(free_body(J), coords3(w))
-        assert abs(ph.period - EulerTop(J, w).period) < 1e-4 * ph.period
+        assert abs(ph.period - EulerTop(J, w).period) < (2e-5 if eps >= 1e-8 else 1e-3) * ph.period
     with pytest.raises(ValueError, match="equilibrium of the reduced flow"):
         ls.reconstruction_phase(free_body(J), coords3([1e-13, 5e-14, 1.0]))
     ph = ls.reconstruction_phase(free_body(J), coords3([[0.3, 0.2, 1.0], [0.0, 0.0, 1.0]]), on_failure="nan")

@@ -59,11 +59,14 @@ class StagePlan:
     b : (S,) ndarray
         Weights of the step (zero past s - 1).
     err : (ne, S) ndarray
-        Error weights (``b - b_hat``, or DOP853's E5 and E3); ``ne = 0`` for fixed-step methods.
+        Error weights (``b - b_hat``, or DOP853's E5 and E3) times the method's ``error_scale``; ``ne = 0`` for
+        fixed-step methods.
     dense : (S, p) ndarray
         Continuous-extension weights: ``b_j(theta) = sum_q dense[j, q] theta^(q+1)``.
     order, error_order, dense_order : int
         ``error_order`` is 0 without an estimator.
+    error_scale : float
+        The factor in ``err`` (the method's calibration of its estimate; 1 for the tableau's own).
     error_exponent : float
         ``-1 / (error_order + 1)`` (0 without an estimator).
     fsal : bool
@@ -86,6 +89,7 @@ class StagePlan:
     error_order: int
     dense_order: int
     error_exponent: float
+    error_scale: float
     fsal: bool
     new_in_step: bool
     step_stages: int
@@ -101,8 +105,9 @@ class StagePlan:
         return self.err.shape[0] == 2
 
 
-def make_plan(tableau: ButcherTableau) -> StagePlan:
-    """The stage plan of ``tableau`` (see the module docstring)."""
+def make_plan(tableau: ButcherTableau, error_scale: float = 1.0) -> StagePlan:
+    """The stage plan of ``tableau`` (see the module docstring); its error weights times ``error_scale`` (a
+    method's calibration of its estimate: every norm of :mod:`.control` scales with the weights)."""
     s = tableau.stages
     extra = 0 if tableau.dense_A is None else tableau.dense_A.shape[0]
     S = s + 1 + extra
@@ -119,7 +124,7 @@ def make_plan(tableau: ButcherTableau) -> StagePlan:
     b[:s] = tableau.b
     err = np.zeros((len(tableau.error_weights), S))
     for r, w in enumerate(tableau.error_weights):
-        err[r, : len(w)] = w
+        err[r, : len(w)] = error_scale * w
     if tableau.dense is not None:
         dense = np.zeros((S, tableau.dense.shape[1]))
         dense[: tableau.dense.shape[0]] = tableau.dense
@@ -137,15 +142,17 @@ def make_plan(tableau: ButcherTableau) -> StagePlan:
         arr.setflags(write=False)
     return StagePlan(name=tableau.name, s=s, S=S, A=A, c=c, b=b, err=err, dense=dense, order=int(tableau.order),
                      error_order=int(tableau.error_order or 0), dense_order=dense_order,
-                     error_exponent=float(tableau.error_exponent or 0.0), fsal=fsal, new_in_step=new_in_step,
+                     error_exponent=float(tableau.error_exponent or 0.0), error_scale=float(error_scale), fsal=fsal,
+                     new_in_step=new_in_step,
                      step_stages=s + int(new_in_step))
 
 
 @functools.cache
-def plan_for(name: str) -> StagePlan:
-    """The stage plan of the tableau called ``name`` (:func:`~.tableaux.get_tableau`), built once: a plan is
-    immutable (frozen, read-only arrays), so every solve of the method shares it."""
-    return make_plan(get_tableau(name))
+def plan_for(name: str, error_scale: float = 1.0) -> StagePlan:
+    """The stage plan of the tableau called ``name`` (:func:`~.tableaux.get_tableau`) with the error weights times
+    ``error_scale``, built once: a plan is immutable (frozen, read-only arrays), so every solve of the method
+    shares it."""
+    return make_plan(get_tableau(name), error_scale)
 
 
 def dense_weights(dense: np.ndarray, theta):

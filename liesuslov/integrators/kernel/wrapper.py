@@ -127,7 +127,9 @@ def _constants(problem: Problem, cplan: CompilePlan, cache: dict) -> tuple[np.nd
     coefficient lists of the field and Omega, the tableau's rows, the dexp⁻¹ series (read-only); the float
     constants after :data:`~.common._FHEAD` zeros, the place of the float head."""
     plan = problem.plan
-    key = ("packed", plan.name, id(cplan))  # cplan lives in the same cache: its id is not reused meanwhile
+    # one tableau gives plans with other error weights (rkmk5 / rkmk45): the name and the scale; cplan lives in
+    # the same cache, so its id is not reused meanwhile
+    key = ("packed", plan.name, plan.error_scale, id(cplan))
     if key not in cache:
         bern = _bernoulli_pairs(int(plan.order))
         ints = np.concatenate([cplan.field_index.ravel(), cplan.omega_index.ravel()]).astype(np.int64)
@@ -147,7 +149,7 @@ def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool, 
     E = 0 if problem.event_coef is None else int(problem.event_coef.shape[1])
     if E:
         cache = {}
-    key = ("iprm", plan.name, id(cplan), problem.mode, problem.chart, kind, bool(problem.skew),
+    key = ("iprm", plan.name, plan.error_scale, id(cplan), problem.mode, problem.chart, kind, bool(problem.skew),
            bool(problem.adaptive), int(problem.max_steps), bool(problem.reproject), bool(record))
     iprm = cache.get(key)
     if iprm is None:
