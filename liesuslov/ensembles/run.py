@@ -492,5 +492,5 @@ def _progress_bar(on: bool, total: int):
     try:
         from tqdm.auto import tqdm
     except ImportError as exc:
-        raise ValueError("progress=True needs tqdm: pip install 'liesuslov[progress]'") from exc
+        raise ValueError("progress=True (the CLI's --progress) needs tqdm: pip install 'liesuslov[progress]'") from exc
     return tqdm(total=total, unit="traj", desc="ensemble")

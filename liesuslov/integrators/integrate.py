@@ -379,7 +379,7 @@ def _run(solver, P: Problem, progress: bool) -> RawResult:
     try:
         from tqdm.auto import tqdm
     except ImportError as exc:
-        raise ValueError("progress=True needs tqdm: pip install 'liesuslov[progress]'") from exc
+        raise ValueError("progress=True (the CLI's --progress) needs tqdm: pip install 'liesuslov[progress]'") from exc
     from . import solve_numpy
 
     with tqdm(total=P.B, unit="trajectory", leave=False, mininterval=0.0) as bar:

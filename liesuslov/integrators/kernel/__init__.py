@@ -110,7 +110,12 @@ Importing this module imports numba; ``import liesuslov`` does not import it.
 from __future__ import annotations
 
 from ..compiled import CompilePlan, NotCompilable, compile_plan, numba_available  # noqa: F401
-from .common import EVENT_CAP, KINDS, LOWRANK_MIN_N  # noqa: F401
-from .wrapper import check, kind_for, solve  # noqa: F401
+
+if not numba_available():  # imported directly (python -m ...kernel.warm): say what is missing, not numba's traceback
+    raise ModuleNotFoundError("the compiled kernel needs numba: pip install 'liesuslov[fast]' (without it, "
+                              "integrate runs on the numpy solver)", name="numba")
+
+from .common import EVENT_CAP, KINDS, LOWRANK_MIN_N  # noqa: E402, F401
+from .wrapper import check, kind_for, solve  # noqa: E402, F401
 
 __all__ = ["solve", "check", "kind_for", "NotCompilable", "KINDS", "LOWRANK_MIN_N"]
