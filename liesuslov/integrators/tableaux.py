@@ -44,6 +44,8 @@ from types import MappingProxyType
 
 import numpy as np
 
+from .control import combine
+
 __all__ = [
     "ButcherTableau",
     "TABLEAUX",
@@ -300,14 +302,11 @@ class ButcherTableau:
         if len(errors) != len(self.error_weights):
             raise ValueError(f"errors must hold {len(self.error_weights)} estimate(s) for tableau "
                              f"{self.name!r}, got {len(errors)}")
-        scaled = [np.asarray(err) / scale for err in errors]
-        if self.E5 is None:
-            return np.sqrt(np.mean(scaled[0] ** 2, axis=axis))
-        s5 = np.sum(scaled[0] ** 2, axis=axis)
-        s3 = np.sum(scaled[1] ** 2, axis=axis)
-        n = scaled[0].size // np.size(s5)
-        denom = n * (s5 + 0.01 * s3)
-        return np.divide(s5, np.sqrt(denom), out=np.zeros_like(denom, dtype=float), where=denom > 0)[()]
+        sums = [np.sum((np.asarray(err) / scale) ** 2, axis=axis) for err in errors]
+        n = np.broadcast_shapes(np.shape(errors[0]), np.shape(scale))
+        ncomp = int(np.prod(n)) // max(1, np.size(sums[0]))
+        two = self.E5 is not None
+        return np.asarray(combine(sums[0], sums[1] if two else 0.0, ncomp, two))[()]  # the controller's formula
 
     def weights_at(self, theta: float) -> np.ndarray:
         """Dense-output weights ``b(theta)``, ``0 <= theta <= 1``: ``y(t + theta h) = y + h b(theta) @ K``."""
