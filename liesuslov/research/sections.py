@@ -103,18 +103,9 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
     elif not reconstruct:
         section = _without_attitude(section, system.n)
     win = R.run_window(system, b.omega, b.Gamma, g, (t0, t1), section, int(direction), opts, reconstruct)
+    # (a plane through the start is not crossed at t0: integrate's rule for linear events within their
+    # rounding of 0 at t0, control.on_surface_at_start)
     cr = win.crossings
-    keep = np.ones(cr.t.size, dtype=bool)
-    if linear and cr.t.size:
-        # a plane's crossing within a rounding-level time of t0 is the start itself (e.g. a return plane through
-        # s0); a callable may depend on t (a clock: a crossing right after t0 is real), so it is not filtered
-        s0 = b.reduced(b.omega, b.Gamma)
-        xdot, Gdot = system.rhs(b.omega, b.Gamma)
-        speed = np.linalg.norm(xdot if Gdot is None else np.concatenate([xdot, Gdot], axis=-1), axis=-1)
-        keep = cr.t - t0 > R.start_time(speed, np.linalg.norm(s0, axis=-1))[cr.index]
-    if not np.all(keep):
-        cr = R.Crossings(cr.t[keep], cr.index[keep], cr.omega[keep], None if cr.Gamma is None else cr.Gamma[keep],
-                         None if cr.g is None else cr.g[keep])
     status = win.status.reshape(b.shape)
     if np.any(status < 0):
         warnings.warn(f"poincare_section: {win.message} (its crossings stop there; record.status says which "
