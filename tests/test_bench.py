@@ -144,6 +144,17 @@ def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_target_without_a_value_says_why():
+    rows = [{"target": "a", "n": 3, "lib_us_per_step": 120.0, "status": "ok", "floor_status": "numba is not installed"},
+            {"target": "b", "n": 3, "batch": 100, "status": "failed", "message": "ValueError: boom"}]
+    summary = targets.summary(rows, {}, [], [])
+    by = {t["target"]: t for t in summary}
+    assert by["a (n = 3)"]["why"] == "numba is not installed" and by["a (n = 3)"]["met"] is None
+    assert by["b"]["why"] == "failed; ValueError: boom"
+    assert by["d"]["why"] in ("numba is not installed", "the n-sweep ran on numpy only (--quick or --backend numpy)")
+    assert by["e"]["why"] == "no error level reached by both liesuslov and scipy"
+
+
 def test_presets():
     quick, full = bench.BenchConfig.quick().validated(), bench.BenchConfig.full().validated()
     assert quick.methods == ("rkmk4", "rkmk45", "rkmk853") and quick.long_run_steps == 0
@@ -186,6 +197,8 @@ def test_target_summary_from_measurements():
     assert by["d"]["value"] == pytest.approx(2.0) and by["d"]["met"]
     assert by["e"]["value"] == 0.2 and not by["e"]["met"]
     assert by["f (import)"]["met"] and by["f (compile)"]["met"] is None
+    # a target without a value says why (the console prints it), a measured one says nothing
+    assert by["f (compile)"]["why"] == "not measured (--quick)" and by["a (n = 3)"]["why"] == ""
     text = bench.tables.targets_section(bench.BenchReport(targets=rows, target_summary=summary))
     assert "## Targets" in text and "max |floor − library| = 1.0e-15" in text
 

@@ -59,7 +59,8 @@ def run_from_args(args: argparse.Namespace) -> int:
                   f"{r['agreement']:.1e} ({verdict}, tolerance {AGREEMENT_TOL:.0e})")
     for t in report.target_summary:
         met = "—" if t["met"] is None or not np.isfinite(t["value"]) else ("met" if t["met"] else "not met")
-        print(f"  target {t['target']:<12} {fmt(t['value'], '.3g'):>8} (goal {t['goal']:g}, {met}): {t['what']}")
+        why = f" [{t['why']}]" if t.get("why") else ""
+        print(f"  target {t['target']:<12} {fmt(t['value'], '.3g'):>8} (goal {t['goal']:g}, {met}): {t['what']}{why}")
     for name, p in report.paths.items():
         if not name.startswith("plot"):
             print(f"wrote {p}")

@@ -21,6 +21,18 @@ def _version(dist: str) -> str:
         return "not installed"
 
 
+def _importable_version(dist: str) -> str:
+    """:func:`_version`, saying so when the distribution is installed but cannot be imported (a broken numba
+    is as absent as a missing one: the compiled targets are not measured)."""
+    version = _version(dist)
+    if version != "not installed":
+        try:
+            __import__(dist)
+        except ImportError as exc:
+            return f"{version} (cannot be imported: {exc})"
+    return version
+
+
 def machine_info() -> dict:
     """CPU model, cores, Python / numpy / scipy / numba / liesuslov versions, date, git commit."""
     cpu = platform.processor() or platform.machine()
@@ -53,5 +65,6 @@ def machine_info() -> dict:
         pass
     return {"cpu": cpu, "cores": f"{usable} usable of {os.cpu_count()}", "platform": platform.platform(),
             "python": platform.python_version(), "numpy": np.__version__, "scipy": _version("scipy"),
-            "numba": _version("numba"), "liesuslov": getattr(ls, "__version__", "?"), "commit": commit or "unknown",
+            "numba": _importable_version("numba"), "liesuslov": getattr(ls, "__version__", "?"),
+            "commit": commit or "unknown",
             "date": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}

@@ -264,10 +264,14 @@ def summary(target_rows: list[dict], scaling_exponent: dict, scaling: list[dict]
     by = {(r["target"], r.get("n")): r for r in target_rows}
     out = []
 
-    def add(key: str, what: str, value: float, goal: float, detail: str, met: bool | None = None) -> None:
+    def add(key: str, what: str, value: float, goal: float, detail: str, met: bool | None = None,
+            why: str = "") -> None:
         if met is None:
             met = bool(value <= goal) if np.isfinite(value) else None  # None: not measured
-        out.append({"target": key, "what": what, "value": value, "goal": goal, "met": met, "detail": detail})
+        if not np.isfinite(value):
+            why = why or "not measured"
+        out.append({"target": key, "what": what, "value": value, "goal": goal, "met": met, "detail": detail,
+                    "why": why if not np.isfinite(value) else ""})
 
     for n in (3, 4):
         r = by.get(("a", n), {})
@@ -275,18 +279,18 @@ def summary(target_rows: list[dict], scaling_exponent: dict, scaling: list[dict]
             r.get("ratio", math.nan), GOALS["a"],
             f"{_num(r.get('lib_us_per_step'))} µs vs {_num(r.get('floor_us_per_step'), '.3g')} µs per step "
             f"({r.get('backend', '?')}, {r.get('steps', '?')} steps); floor = library to "
-            f"{_num(r.get('agreement'), '.1e')}" + _status(r))
+            f"{_num(r.get('agreement'), '.1e')}" + _status(r), why=_why(r))
     r = by.get(("b", 3), {})
     add("b", f"batch of {r.get('batch', '?')}, n = 3: library / single-threaded floor per trajectory-step",
         r.get("ratio", math.nan), GOALS["b"],
         f"{_num(r.get('lib_ns_per_traj_step'))} ns vs {_num(r.get('floor_ns_per_traj_step'))} ns "
-        f"({r.get('backend', '?')}); floor = library to {_num(r.get('agreement'), '.1e')}" + _status(r))
+        f"({r.get('backend', '?')}); floor = library to {_num(r.get('agreement'), '.1e')}" + _status(r), why=_why(r))
     r = by.get(("c", None), {})
     add("c", f"adaptive, {DENSE_POINTS} output times: nfev / nfev of the end point only", r.get("ratio", math.nan),
         GOALS["c"], f"{r.get('nfev_dense', '?')} vs {r.get('nfev_end', '?')} evaluations, {r.get('steps_dense', '?')} "
         f"vs {r.get('steps_end', '?')} steps (rkmk853, rtol 1e-10, default scene); scipy DOP853 on the embedded ODE: "
         f"{_num(r.get('scipy_ratio'), '.3g')} ({r.get('scipy_nfev_dense', '?')} vs {r.get('scipy_nfev_end', '?')})"
-        + _status(r))
+        + _status(r), why=_why(r))
     fit = scaling_exponent.get("numba/exp") or scaling_exponent.get("exp")
     ran = [x for x in scaling if x.get("requested") == "numba" and x.get("chart") == "exp" and x.get("status") == "ok"]
     nmax = max((x["n"] for x in ran), default=None)
@@ -294,26 +298,36 @@ def summary(target_rows: list[dict], scaling_exponent: dict, scaling: list[dict]
     add("d", "Fedorov–Kozlov + g, backend numba, to n = 256: exponent of the cost per step",
         fit["exponent"] if fit else math.nan, GOALS["d"],
         (f"fit over n = {fit['sizes']}; " if fit else "no fit; ") + f"largest n on numba: {nmax or '—'}",
-        met=bool(reached and fit["exponent"] <= GOALS["d"] + 0.3) if fit else None)
+        met=bool(reached and fit["exponent"] <= GOALS["d"] + 0.3) if fit else None,
+        why=("numba is not installed" if not have_floor() else
+             "fewer than two sizes ran on numba" if any(x.get("requested") == "numba" for x in scaling) else
+             "the n-sweep ran on numpy only (--quick or --backend numpy)"))
     finite = [x for x in ratios if np.isfinite(x.get("ratio_dop853", math.nan))]
     worst = max(finite, key=lambda x: x["ratio_dop853"], default=None)
     add("e", "work-precision: fastest liesuslov / scipy DOP853 at equal error, worst of 1e-5 … 1e-10",
         worst["ratio_dop853"] if worst else math.nan, GOALS["e"],
         (f"worst at {worst['scene']} {worst['level']:.0e}; best "
-         f"{min(x['ratio_dop853'] for x in finite):.3f}" if worst else "no level reached by both"))
+         f"{min(x['ratio_dop853'] for x in finite):.3f}" if worst else "no level reached by both"),
+        why="no error level reached by both liesuslov and scipy")
     r = by.get(("f", None), {})
     add("f (import)", "`import liesuslov` in a fresh process (s)", r.get("import_s", math.nan), GOALS["f-import"],
-        f"fastest of {r.get('import_runs', '?')} processes" + _status(r))
+        f"fastest of {r.get('import_runs', '?')} processes" + _status(r), why=_why(r))
     add("f (compile)", "first compiled call, fresh process, empty numba cache (s)",
         r.get("first_call_cold_s", math.nan), GOALS["f-compile"],
         f"then {_num(r.get('first_call_cached_s'))} s in the next process (cache on disk); "
-        f"{r.get('compile_status', '')}")
+        f"{r.get('compile_status', '')}", why=r.get("compile_status") or _why(r))
     return out
 
 
 def _num(x, spec: str = ".4g") -> str:
     """A number for the detail column, a dash when missing."""
     return format(float(x), spec) if isinstance(x, (int, float, np.floating)) and np.isfinite(x) else "—"
+
+
+def _why(r: dict) -> str:
+    """Why a target has no value (its measurement failed, or the floor could not run), for the console."""
+    bad = [str(r[k]) for k in ("status", "floor_status") if r.get(k) not in (None, "ok")]
+    return "; ".join(bad + ([r["message"]] if r.get("message") else []))
 
 
 def _status(r: dict) -> str:
