@@ -435,6 +435,23 @@ def test_user_event_sees_the_batch_axes_and_may_use_per_trajectory_parameters():
         ls.integrate(system, O, (0.0, 5.0), Gamma0=Gamma0, method="rkmk45", events=lambda t, O_, G, g: np.zeros(3))
 
 
+def test_user_event_on_se2_sees_omega_coordinates_and_g():
+    """On algebras other than so(n) an event gets Omega as coordinates (..., d) (there is no skew matrix;
+    sol.Omega is None too) and g in SE(2) (..., 3, 3): a pure translation at speed v reaches x = 1/2 at 1/(2v)."""
+    se2 = ls.SuslovSystem(ls.Inertia(ls.se(2), np.eye(3)), constraints="none")
+    shapes = set()
+
+    def x_half(t, Omega, Gamma, g):
+        shapes.add((np.shape(t), Omega.shape, Gamma, g.shape))
+        return g[..., 0, 2] - 0.5
+
+    sol = ls.integrate(se2, np.array([[0.0, 1.0, 0.0], [0.0, 0.5, 0.0]]), (0.0, 3.0), method="rkmk45",
+                       reconstruct=True, events=x_half)
+    assert shapes == {((2,), (2, 3), None, (2, 3, 3))} and sol.Omega is None
+    rec = sol.events[0]
+    assert rec.index.tolist() == [0, 1] and np.allclose(rec.t, [0.5, 1.0], rtol=0, atol=1e-12)
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_root_on_a_step_end_is_one_crossing(backend):
     """A value that reaches exactly 0 at a step's end is one crossing (scipy's rule counts it again when

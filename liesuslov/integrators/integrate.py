@@ -117,8 +117,8 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         Keep what :meth:`Solution.at` needs to give the state at any time of t_span.
     events : callable or list of callables, optional
         ``event(t, Omega, Gamma, g) -> (...)`` with scipy's ``terminal`` and ``direction`` attributes,
-        called with the batch axes leading (see :mod:`liesuslov.integrators.events`); crossings in
-        ``sol.events``.
+        called with the batch axes leading (see :mod:`liesuslov.integrators.events`; Omega is given as
+        coordinates (..., d) on algebras other than so(n), such as se(2), se(3)); crossings in ``sol.events``.
     form : str
         Force a model form ("auto", "reduced", "eigenspace", "symmetric", "multiplier").
     first_step : float, optional
