@@ -105,7 +105,11 @@ def _n_dask_workers(client) -> int:
 
 
 def _check_running(executor) -> None:
-    """Raise ``ValueError`` naming ``executor`` when it can no longer run tasks (shut down, closed, broken)."""
+    """Raise ``ValueError`` naming ``executor`` when it can no longer run tasks (shut down, closed, broken).
+
+    Before anything is written (a store): the stdlib pools' shutdown and broken flags, a Dask client's
+    status. They are private attributes (read with a default, so a pool without them passes); the rule for
+    every executor is the first submission: one refused is the same ValueError (:func:`~.run._run_all`)."""
     if executor is None:
         return
     if _is_dask(executor):
