@@ -59,6 +59,8 @@ def initial_states(system, rng, B: int):
 
 def main(out_dir=None, quick: bool = False) -> Path:
     T = 15.0 if quick else 200.0
+    # a --quick run (the tests) never waits for the one-off compilation of the optional numba kernel
+    backend = "numpy" if quick else "auto"
     rng = np.random.default_rng(7)
     fig = Figure(figsize=(11, 6), layout="constrained")
     ax = fig.add_subplot()
@@ -68,7 +70,7 @@ def main(out_dir=None, quick: bool = False) -> Path:
         omega, G = initial_states(system, rng, 2)
         res = ls.lyapunov_exponent(system, omega, (0.0, T), Gamma0=G if with_gamma else None, seed=k,
                                    return_history=True, method="rkmk853", rtol=1e-8,
-                                   atol=1e-10)
+                                   atol=1e-10, backend=backend)
         print(f"  {name:28s} {np.array2string(res.exponent, precision=4, floatmode='fixed')}   "
               f"spread over the second half {np.max(res.spread):.2e}")
         for j in range(2):

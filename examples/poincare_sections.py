@@ -38,13 +38,16 @@ def scenes():
 
 def main(out_dir=None, quick: bool = False) -> Path:
     N, T = (4, 40.0) if quick else (8, 250.0)
+    # a --quick run (the tests) never waits for the one-off compilation of the optional numba kernel
+    backend = "numpy" if quick else "auto"
     fig = Figure(figsize=(11, 5), layout="constrained")
     for k, (title, system, case) in enumerate(scenes()):
         D = system.constraints
         omega0 = np.array([0.5, 0.3]) @ D.basis
         G0 = np.array([0.6, 0.0, 0.8])
         omega, Gamma = same_energy_states(system, omega0, G0, N, seed=1, scale=0.6)
-        rec = ls.poincare_section(system, omega, (0.0, T), gamma_crossing(3), Gamma0=Gamma, direction=1)
+        rec = ls.poincare_section(system, omega, (0.0, T), gamma_crossing(3), Gamma0=Gamma, direction=1,
+                                  backend=backend)
         E = system.energy(omega, Gamma)
         drift = np.max(np.abs(system.energy(rec.omega, rec.Gamma) - E[rec.index]))
         line = f"{title}: {rec.t.size} crossings of {N} trajectories, energy drift at the crossings {drift:.2e}"
@@ -52,7 +55,7 @@ def main(out_dir=None, quick: bool = False) -> Path:
             F = case.integrals["F"]
             dF = np.max(np.abs(F(rec.omega, rec.Gamma) - F(omega, Gamma)[rec.index]))
             line += f", |F - F(0)| <= {dF:.2e}"
-        lam = ls.lyapunov_exponent(system, omega[:4], (0.0, T / 2), Gamma0=Gamma[:4], seed=0)
+        lam = ls.lyapunov_exponent(system, omega[:4], (0.0, T / 2), Gamma0=Gamma[:4], seed=0, backend=backend)
         print(line)
         print(f"    largest Lyapunov exponents of 4 of them over t = {T / 2:g}: {np.array2string(lam, precision=3)}"
               f" (log t / t = {np.log(T / 2) / (T / 2):.2e})")
