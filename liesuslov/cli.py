@@ -252,7 +252,7 @@ def _print_header(scene) -> None:
         print(f"state: {model.state_dim} numbers per trajectory")
     if scene.backend != "numpy" and importlib.util.find_spec("numba") is not None:
         print("(backend: the compiled kernel if the model qualifies; the first compiled run on a machine "
-              "compiles it, 30-90 s, once)")
+              "compiles it, 20-90 s, once)")
 
 
 def _integrate_and_report(scene, tol: float | None, failed_note: str = ""):

@@ -406,13 +406,14 @@ def _lagrange_quasi_periodic():
 
 
 def test_quasi_periodic_motion_has_no_false_period_at_loose_rtol():
-    """At rtol 1e-5 two of these six trajectories come back within 1e-2 of their start (the old return test):
-    a candidate return must close on the checking re-integration, which these do not (1.2 %, 0.8 %)."""
+    """At rtol 1e-4 three of these six trajectories come back within 1e-2 of their start (the old return test;
+    0.1 %, 0.8 %, 0.07 %): a candidate return must close on the checking re-integration, which these do not
+    (1.2 %, 0.8 %, 2.0 %)."""
     sysm, x0, G = _lagrange_quasi_periodic()
-    rows = [0, 3]
+    rows = [0, 3, 4]
     with pytest.raises(ValueError, match="t_max = 1000"):
-        ls.reconstruction_phase(sysm, x0[rows], Gamma0=G[rows], rtol=1e-5, atol=1e-8)
-    ph = ls.reconstruction_phase(sysm, x0[rows], Gamma0=G[rows], rtol=1e-5, atol=1e-8, on_failure="nan")
+        ls.reconstruction_phase(sysm, x0[rows], Gamma0=G[rows], rtol=1e-4, atol=1e-7)
+    ph = ls.reconstruction_phase(sysm, x0[rows], Gamma0=G[rows], rtol=1e-4, atol=1e-7, on_failure="nan")
     assert np.all(ph.status == 1) and np.all(np.isnan(ph.period))
     assert np.all(ph.return_distance <= 1e-2)          # they were candidates ...
     assert np.all(ph.closure > 5e-3)                   # ... that do not close

@@ -521,7 +521,7 @@ def test_adaptive_error_tracks_rtol(backend):
 def test_global_error_at_equal_rtol_is_near_scipys_on_a_hard_state():
     """An audit's state of the KT body: at rtol 1e-8 the global error of rkmk853 was 26x that of scipy's DOP853
     on the same embedded ODE (22x at 1e-6, 49x at 1e-10) — the DOP853 estimator applied to the chart stages
-    underestimates RKMK's local error on coupled scenes. With the method's error_scale (10) it is ~2x; the
+    underestimates RKMK's local error on coupled scenes. With the method's error_scale (20) it is 1.7x; the
     docs' distribution over random states: numerics.md "What the tolerance means"."""
     from scipy.integrate import solve_ivp
 
@@ -538,13 +538,13 @@ def test_global_error_at_equal_rtol_is_near_scipys_on_a_hard_state():
         xi = model.xi_from_coords(x[None])
         return np.concatenate([model.omega_coords(model.xi_dot(xi, (g.T @ Gamma0)[None]))[0],
                                (g @ model.omega_matrix(xi)[0]).ravel()])
-    rtol = 1e-8
-    sc = solve_ivp(rhs, (0.0, 20.0), np.concatenate([omega0, np.eye(4).ravel()]), method="DOP853", rtol=rtol,
-                   atol=1e-2 * rtol, t_eval=t_eval)
-    scipy_error = np.max(np.abs(sc.y[-16:].T.reshape(-1, 4, 4) - g_ref))
-    sol = ls.integrate(kt, omega0, (0.0, 20.0), Gamma0=Gamma0, reconstruct=True, method="rkmk853", rtol=rtol,
-                       atol=1e-2 * rtol, t_eval=t_eval, backend="numpy")
-    assert np.max(np.abs(sol.g - g_ref)) < 5.0 * scipy_error
+    for rtol in (1e-8, 1e-10):  # measured 1.7x and 2.9x (the issue's bound: 3x; 2.3x and 5.9x with a scale of 10)
+        sc = solve_ivp(rhs, (0.0, 20.0), np.concatenate([omega0, np.eye(4).ravel()]), method="DOP853", rtol=rtol,
+                       atol=1e-2 * rtol, t_eval=t_eval)
+        scipy_error = np.max(np.abs(sc.y[-16:].T.reshape(-1, 4, 4) - g_ref))
+        sol = ls.integrate(kt, omega0, (0.0, 20.0), Gamma0=Gamma0, reconstruct=True, method="rkmk853", rtol=rtol,
+                           atol=1e-2 * rtol, t_eval=t_eval, backend="numpy")
+        assert np.max(np.abs(sol.g - g_ref)) < 3.0 * scipy_error, rtol
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

@@ -63,7 +63,7 @@ METHODS: dict[str, Method] = {
     "rkmk8": Method("dop853", False, "RKMK with the DOP853 weights, order 8, fixed step"),
     "rkmk23": Method("bs3", True, "RKMK with the Bogacki–Shampine 3(2) pair, adaptive", error_scale=3.0),
     "rkmk45": Method("dopri5", True, "RKMK with the Dormand–Prince 5(4) pair, adaptive", error_scale=3.0),
-    "rkmk853": Method("dop853", True, "RKMK with the Dormand–Prince 8(5,3) pair, adaptive", error_scale=10.0),
+    "rkmk853": Method("dop853", True, "RKMK with the Dormand–Prince 8(5,3) pair, adaptive", error_scale=20.0),
 }
 
 BACKENDS = ("auto", "numpy", "numba")
@@ -130,9 +130,10 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         trajectory ends, the compiled batch at its end.
     backend : {"auto", "numpy", "numba"}
         "auto" runs the compiled kernel (``liesuslov[fast]``) when numba is installed and the problem
-        qualifies (a polynomial field — built-in potentials, gyroscopic term; a group part on so(n);
-        events that are :class:`LinearEvent`), else the numpy solver; ``stats["backend"]`` says which ran
-        and ``stats["backend_reason"]`` why. "numba" raises ValueError saying why it cannot run.
+        qualifies (a polynomial field — built-in potentials, gyroscopic term; a group part on a matrix
+        algebra — so(n), se(2), se(3); events that are :class:`LinearEvent`), else the numpy solver;
+        ``stats["backend"]`` says which ran and ``stats["backend_reason"]`` why. "numba" raises ValueError
+        saying why it cannot run.
     reproject : bool
         Re-orthonormalise g (renormalise Gamma) every max(64, n) accepted steps, a correction far below
         the truncation error; False leaves the structure to the chart alone.

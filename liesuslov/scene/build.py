@@ -325,7 +325,7 @@ def _potential_of(parent: _Table, key: str, value: Any, n: int | None):
     if kind == "linear":
         B = t.array("B", [(n,)], f"a list of {n} numbers (B_1, ..., B_{n}): V = sum_i B_i Gamma_i")
         return _wrap(t, "B", lambda: LinearPotential(B))
-    B = t.array("B", [(n,), (n, n)], f"a list of {n} numbers (V = 1/2 sum_i B_i Gamma_i^2) or an "
+    B = t.array("B", [(n,), (n, n)], f"a list of {n} numbers (V = 1/2 sum_i B_i Gamma_i^2) or a "
                                      f"{n}×{n} matrix (V = 1/2 Gamma^T B Gamma)")
     return _wrap(t, "B", lambda: QuadraticPotential(B))
 

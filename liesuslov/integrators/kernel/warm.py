@@ -2,7 +2,7 @@
 
 The compiled loop is specialised per family of kinds (:data:`~.common.FAMILIES`: no group part, the closed
 forms so3 and so4, and the matrix algorithms dense and lowrank): the first run of a family on a machine
-compiles it (~20 s with no group part, ~30–40 s for the closed forms, ~70–90 s for the matrices, on a 2-core
+compiles it (~20 s with no group part, ~30 s for the closed forms, ~70–90 s for the matrices, on a 2-core
 machine; numba compiles one function at a time, under a lock), later processes load it from the cache
 (< 1 s). :func:`compile_kinds` compiles them in parallel processes — one per core — so a cluster node, a
 container image or a test session pays that once, in the wall time of the slowest rather than the sum::
