@@ -707,6 +707,21 @@ def test_subspace_errors():
         ls.Inertia.from_mass_tensor(np.ones(4)).restrict(ls.suslov_distribution(3))
 
 
+def test_inertia_mass_tensor_must_give_K():
+    """Beyond d = 64 the so(n) action goes through the mass tensor and never reads K: an I that is not K's
+    was used silently (an error of 54 on n = 16)."""
+    n = 16
+    I = np.arange(1.0, n + 1.0)
+    body = ls.Inertia.from_mass_tensor(I)
+    x = np.random.default_rng(0).normal(size=n * (n - 1) // 2)
+    same = ls.Inertia(ls.so(n), body.matrix, mass_tensor=I)
+    assert np.max(np.abs(same(x) - body(x))) < 1e-12 and same.diagonal is not None
+    with pytest.raises(ValueError, match="mass_tensor: K is not the inertia"):
+        ls.Inertia(ls.so(n), body.matrix, mass_tensor=np.ones(n))
+    with pytest.raises(ValueError, match="mass_tensor is a body on so\\(3\\), but the algebra is se\\(3\\)"):
+        ls.Inertia(ls.se(3), np.eye(6), mass_tensor=np.ones(3))
+
+
 def test_inertia_errors():
     alg = ls.so(3)
     with pytest.raises(ValueError, match="K must have shape"):

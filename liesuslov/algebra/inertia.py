@@ -40,6 +40,9 @@ class Inertia:
     algebra : LieAlgebra
     K : array_like, shape (d, d)
         Matrix of J in the algebra's coordinates: ``J(x) = K x`` (K symmetric, so also ``x @ K``).
+    mass_tensor : array_like, shape (n, n) or (n,), optional
+        The body's mass tensor I when K is ``J(Omega) = I Omega + Omega I`` on so(n): kept as
+        :attr:`mass_tensor`, through which the so(n) paths act (O(n^3) instead of O(d^2)); checked to give K.
 
     Attributes
     ----------
@@ -54,7 +57,7 @@ class Inertia:
     ------
     ValueError
         If K has the wrong shape, is not symmetric, or not positive definite (the message gives
-        the smallest eigenvalue).
+        the smallest eigenvalue); if ``mass_tensor`` does not give K.
 
     Notes
     -----
@@ -84,9 +87,19 @@ class Inertia:
         K.setflags(write=False)
         self.algebra = algebra
         self.__dict__["matrix"] = K  # fills the cached property
-        self.mass_tensor = None if mass_tensor is None else np.array(mass_tensor, dtype=float)
-        self.diagonal = None
-        self._eig = None
+        self.mass_tensor, self.diagonal, self._eig = None, None, None
+        if mass_tensor is not None:
+            # the so(n) paths act through I (O(n^3)) and never read K: an I that is not K's would be used silently
+            body = Inertia.from_mass_tensor(mass_tensor)
+            if body.algebra.dim != d or not algebra.name.startswith("so("):
+                raise ValueError(f"mass_tensor is a body on {body.algebra.name}, but the algebra is {algebra.name}; "
+                                 "pass mass_tensor only on so(n), with the K it gives")
+            gap = float(np.max(np.abs(body.matrix - K)))
+            if gap > 1e-12 * max(1.0, float(np.max(np.abs(K)))):
+                raise ValueError(f"mass_tensor: K is not the inertia J(Omega) = I Omega + Omega I of this mass tensor "
+                                 f"(largest difference {gap:.3g}); build it with Inertia.from_mass_tensor(I), or "
+                                 "leave mass_tensor out")
+            self.mass_tensor, self.diagonal, self._eig = body.mass_tensor, body.diagonal, body._eig
 
     # ------------------------------------------------------------------ constructors
     @classmethod

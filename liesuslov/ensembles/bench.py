@@ -38,6 +38,14 @@ def benchmark(n: int = 1_000_000, workers: tuple[int, ...] = (1, 2), *, n_throug
         Trajectories of the memory run (``reduce="final"``, streamed to ``store``, 2 workers at most).
     workers : tuple of int
         Worker counts of the throughput runs (each with ``n_throughput`` trajectories).
+    n_throughput : int
+        Trajectories of each throughput run.
+    chunk_size : int
+        Trajectories per chunk (task), in every run.
+    h : float
+        RKMK4's step.
+    t_end : float
+        Each trajectory is integrated over ``(0, t_end)``: ``t_end / h`` steps.
     executor : {"process", "dask"}
         A ``ProcessPoolExecutor`` or a local Dask cluster (``LocalCluster(processes=True)``).
     store : path, optional

@@ -120,6 +120,9 @@ def draw(sampler: Callable, n: int, seed=None, *, start: int = 0, stop: int | No
         As passed to :func:`ensemble` (None is not reproducible: pass the ``stats["seed"]`` of a run).
     start, stop : int
         Only trajectories ``[start, stop)`` (default all ``n``).
+    block : int
+        Trajectories drawn per generator (:data:`SAMPLER_BLOCK`, as :func:`ensemble` draws them; another
+        value draws other numbers).
 
     Returns
     -------

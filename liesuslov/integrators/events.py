@@ -212,6 +212,15 @@ def coordinate_plane(variable: str, index: int, value: float = 0.0, *, dim: int,
     value : float
     dim : int
         The dimension of the variable (d for omega, n for Gamma).
+    terminal : bool or int
+        scipy's convention: True stops a trajectory at its first crossing, an integer N >= 0 at its N-th
+        (0 never); default False.
+    direction : {-1, 0, 1}
+        Only crossings where the value goes down (-1), up (+1), or both (0), along the integration.
+
+    Returns
+    -------
+    LinearEvent
     """
     if variable not in ("omega", "Gamma"):
         raise ValueError(f"variable must be 'omega' or 'Gamma', got {variable!r}")
@@ -248,6 +257,22 @@ def return_plane(system, Omega0, Gamma0=None, *, terminal: bool | int = False, d
     system : SuslovSystem
     Omega0 : array_like, shape (..., n, n) or (..., d)
     Gamma0 : array_like, shape (..., n), optional
+    terminal : bool or int
+        scipy's convention: True stops a trajectory at its first crossing, an integer N >= 0 at its N-th
+        (0 never); default False.
+    direction : {-1, 0, 1}
+        Only crossings where the value goes down (-1), up (+1), or both (0), along the integration; default +1 (the
+        side the flow leaves at t0, so a return crosses it upward).
+
+    Returns
+    -------
+    LinearEvent
+        One plane per trajectory (coefficients and offset with the batch axes of the initial data).
+
+    Raises
+    ------
+    ValueError
+        If an initial state is an equilibrium (zero reduced velocity: no transverse plane).
     """
     omega0, Gamma0_, domega, dGamma = initial_velocity(system, Omega0, Gamma0)
     offset = np.sum(domega * omega0, axis=-1)
