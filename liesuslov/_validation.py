@@ -74,6 +74,16 @@ _SMALL = 32
 _SEQUENTIAL_MAX = 7
 
 
+def read_only(x: Any) -> np.ndarray:
+    """``x`` as a float array that cannot be written through: what a user callable is given of the solver's state.
+
+    A view (no copy, ~0.3 µs) with ``writeable = False``: a callable that assigns into its argument (``G[...] =
+    0``) raises numpy's "assignment destination is read-only" instead of changing the state being integrated."""
+    view = np.asarray(x, dtype=float).view()
+    view.flags.writeable = False
+    return view
+
+
 def all_finite(arr: np.ndarray) -> bool:
     """True iff every entry of the float array ``arr`` is finite.
 

@@ -772,3 +772,25 @@ def test_a_potential_returning_complex_numbers_is_a_type_error():
     with pytest.raises(TypeError, match=r"potential\.V must return real numbers"):
         SuslovSystem(J, potential=complex_V)
     SuslovSystem(J, potential=Potential(lambda G: G[..., 2] > 0, lambda G: 0 * G))  # booleans are numbers
+
+
+def test_user_callables_cannot_write_into_the_integrated_state():
+    """A gradient that assigned into its argument zeroed the integrator's Gamma and the run reported success with
+    |Gamma| = 0 (an audit); user callables get the state read-only — potentials (caught at construction, with
+    the fix) and events (which received views of the solver's Gamma and g)."""
+    J = Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0]))
+
+    def grad(G):
+        G[...] = 0.0
+        return np.zeros_like(G)
+
+    with pytest.raises(ValueError, match="read-only: compute on a copy"):
+        SuslovSystem(J, potential=Potential(lambda G: G[..., 0], grad))
+    system = SuslovSystem(J, potential=ls.LinearPotential([0.0, 0.0, 1.0]))
+
+    def meddling(t, Omega, Gamma, g):
+        Gamma[..., 0] = 0.0
+        return Gamma[..., 2] - 0.5
+
+    with pytest.raises(ValueError, match=r"events\[0\] raised ValueError: assignment destination is read-only"):
+        ls.integrate(system, [0.0, 0.6, -0.4], (0.0, 5.0), Gamma0=[0.0, 0.6, 0.8], method="rkmk45", events=meddling)

@@ -320,10 +320,59 @@ def test_at_gives_exact_structure_and_rejects_outside(backend):
     plain = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45")
     with pytest.raises(ValueError, match="dense_output"):
         plain.at([0.5])
+    with pytest.raises(ValueError, match="1-D array of times"):
+        sol.at(ts.reshape(3, 1))
+    s.t[0] = -1.0  # the returned t is the solution's own
+    assert ts[0] == 7.3
+    # a pickled Solution keeps its dense output when its problem pickles: the same numbers, bitwise
     copied = pickle.loads(pickle.dumps(sol))
     assert np.array_equal(copied.g, sol.g)
-    with pytest.raises(ValueError, match="pickled or copied"):
-        copied.at([0.5])
+    again = copied.at(ts)
+    assert np.array_equal(again.g, sol.at(ts).g) and np.array_equal(again.omega, sol.at(ts).omega)
+    # ... and says why not when it does not (a lambda event)
+    lam = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", dense_output=True,
+                       events=lambda t, O, G, g: G[..., 0] - 0.5)
+    with pytest.raises(ValueError, match="pickled or copied while its problem does not pickle"):
+        pickle.loads(pickle.dumps(lam)).at([0.5])
+
+
+def test_at_does_not_depend_on_the_callers_arrays_afterwards():
+    """The solution owns its initial data: changing g0 after integrate changed what at() replayed (an audit:
+    O(1) in omega)."""
+    system, Omega0, Gamma0 = kt_body()
+    R = np.linalg.qr(np.random.default_rng(3).normal(size=(4, 4)))[0]
+    R[:, 0] *= np.sign(np.linalg.det(R))
+    g0 = R.copy()
+    sol = ls.integrate(system, Omega0, (0.0, 2.0), Gamma0=Gamma0, g0=g0, reconstruct=True, method="rkmk45",
+                       dense_output=True)
+    before = sol.at([1.0])
+    g0[:] = np.eye(4)
+    after = sol.at([1.0])
+    assert np.array_equal(before.omega, after.omega) and np.array_equal(before.g, after.g)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_g0_near_the_group_is_moved_onto_it(backend):
+    """g0 within the 1e-8 tolerance but off SO(4) (or SE(3)'s rotation block) starts on the group: the structure
+    is exact from t0 on, not 1e-9 off at every time (an audit)."""
+    system, Omega0, Gamma0 = kt_body()
+    R = np.linalg.qr(np.random.default_rng(4).normal(size=(4, 4)))[0]
+    R[:, 0] *= np.sign(np.linalg.det(R))
+    sol = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, g0=R + 1e-9, reconstruct=True, method="rkmk45",
+                       t_eval=[0.0, 0.5, 1.0], backend=backend)
+    assert np.max(np.abs(np.swapaxes(sol.g, -1, -2) @ sol.g - np.eye(4))) < 1e-14
+    assert np.max(np.abs(np.linalg.norm(sol.Gamma, axis=-1) - 1.0)) < 1e-14
+    assert np.max(np.abs(sol.g[0] - R)) < 1e-8
+    se3 = ls.SuslovSystem(ls.Inertia(ls.se(3), np.eye(6)), constraints="none")
+    h0 = np.eye(4)
+    Q = np.linalg.qr(np.ones((3, 3)) + np.eye(3))[0]
+    h0[:3, :3] = Q * np.sign(np.linalg.det(Q)) + 1e-9  # (-Q has the other determinant in 3 dimensions)
+    h0[:3, 3] = [1.0, 2.0, 3.0]
+    se = ls.integrate(se3, 0.1 * np.ones(6), (0.0, 1.0), method="rkmk4", h=0.1, reconstruct=True, g0=h0,
+                      t_eval=[0.0, 1.0], backend=backend)
+    rot = se.g[..., :3, :3]
+    assert np.max(np.abs(np.swapaxes(rot, -1, -2) @ rot - np.eye(3))) < 1e-14
+    assert np.array_equal(se.g[0, :3, 3], h0[:3, 3])
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -628,3 +677,16 @@ def test_progress_bar_counts_trajectories(backend, capsys):
     sol = ls.integrate(system, w, (0.0, 1.0), method="rkmk45", progress=True, backend=backend)
     assert sol.success
     assert "3/3" in capsys.readouterr().err
+
+
+def test_linear_event_called_directly_reads_so3_matrices():
+    """Called as integrate calls an event (Omega skew (..., n, n) on so(n)), a LinearEvent on so(3) read the
+    matrix as three coordinate vectors (n = d = 3; an audit): 0.1, 0, -0.3 for the value 0.2."""
+    ev = ls.integrators.LinearEvent(omega=[0.0, 1.0, 0.0], offset=0.05)
+    x = np.array([0.1, 0.2, 0.3])
+    assert ev(0.0, ls.so(3).hat(x), None, None) == pytest.approx(0.15)
+    assert ev(0.0, x, None, None) == pytest.approx(0.15)
+    batch = np.arange(9.0).reshape(3, 3)  # three coordinate vectors (not skew)
+    assert np.allclose(ev(0.0, batch, None, None), batch[:, 1] - 0.05)
+    ev4 = ls.integrators.LinearEvent(omega=np.arange(6.0))
+    assert ev4(0.0, ls.so(4).hat(np.ones(6)), None, None) == pytest.approx(15.0)

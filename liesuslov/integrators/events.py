@@ -170,10 +170,14 @@ class LinearEvent:
         val = -self.offset
         if self.omega is not None:
             x = np.asarray(Omega)
-            if x.ndim >= 2 and x.shape[-1] == x.shape[-2] and x.shape[-1] != self.omega.shape[-1]:
+            d, n = self.omega.shape[-1], x.shape[-1] if x.ndim >= 2 else 0
+            # as integrate calls it: skew (..., n, n) on so(n), coordinates (..., d) elsewhere. A size test alone
+            # misread so(3) (n = d = 3) matrices as three coordinate vectors; a batch of coordinate vectors that is
+            # exactly skew (zero diagonal, x_ij = -x_ji) is the one input read the other way
+            if n * (n - 1) // 2 == d and x.shape[-2] == n and np.array_equal(x, -np.swapaxes(x, -1, -2)):
                 from ..algebra import so
 
-                x = so(x.shape[-1]).vee(x)
+                x = so(n).vee(x)
             val = val + np.sum(self.omega * x, axis=-1)
         if self.Gamma is not None:
             if Gamma is None:

@@ -24,6 +24,7 @@ from .._validation import (
     unit_vectors,
 )
 from ..algebra.elements import body_vector, omega_coordinates
+from ..groups import orthonormalize
 from ..mechanics.protocol import ModelProtocol
 from ..mechanics.system import SuslovSystem
 from .charts import CHARTS
@@ -239,10 +240,18 @@ def _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form):
             g_init = np.eye(m)
         else:
             g_init = as_float_array(g0, "g0", ndim_min=2, tail=(m, m))
+            # accepted within 1e-8 of the group, then moved onto it (as Gamma0 is normalised): the structure is
+            # exact from t0 on (to rounding), and the solution owns its copy (a later change of the caller's
+            # array would change what sol.at replays)
             if alg.name.startswith("so("):
                 check_rotations(g_init, "g0")
+                g_init = orthonormalize(g_init)
             elif alg.name.startswith("se("):
                 check_rigid_motions(g_init, "g0")
+                g_init = g_init.copy()
+                g_init[..., :-1, :-1] = orthonormalize(g_init[..., :-1, :-1])
+            else:
+                g_init = g_init.copy()
         shapes.append(g_init.shape[:-2])
     elif g0 is not None:
         raise ValueError("g0 was given but reconstruct=False; pass reconstruct=True to integrate g")
@@ -466,9 +475,20 @@ class _Replay:
         self.problem, self.solver, self.batch_shape = problem, solver, batch_shape
         self.method, self.chart = method, chart
 
+    def __getstate__(self) -> dict:
+        # a module does not pickle: the solver by name, imported again on loading (a pickled Solution keeps
+        # its dense output wherever its problem — model, initial data, events — pickles)
+        return {**self.__dict__, "solver": "numba" if self.solver is not _numpy_solver() else "numpy"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.solver = _numpy_solver() if state["solver"] == "numpy" else _kernel()
+
     def __call__(self, t) -> Solution:
         P = self.problem
-        ts = as_float_array(t, "t")
+        ts = np.array(as_float_array(t, "t"), dtype=float)  # the Solution's own t, not a view of the caller's
+        if ts.ndim > 1:
+            raise ValueError(f"sol.at(t): t must be a time or a 1-D array of times (M,), got shape {ts.shape}")
         ts = ts.reshape(-1)
         lo, hi = min(P.t0, P.t1), max(P.t0, P.t1)
         if ts.size == 0:

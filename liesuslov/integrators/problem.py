@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._validation import read_only
 from .plan import StagePlan
 
 __all__ = ["Problem", "RawResult", "STATUS_FAILED", "STATUS_REACHED", "STATUS_TERMINAL", "FAILURES", "run_message",
@@ -167,7 +168,8 @@ class Problem:
                 Gamma = np.matmul(self.gamma[:, None, :], g)[:, 0, :]  # Gamma = g^T gamma
         elif self.mode == "gamma":
             Gamma = np.reshape(G, (xi.shape[0], -1))
-        return Omega, Gamma, g
+        # views of the solver's state, given to user callables: read-only, so an event cannot change it
+        return read_only(Omega), None if Gamma is None else read_only(Gamma), None if g is None else read_only(g)
 
     def call_event(self, e: int, t: np.ndarray, xi: np.ndarray, G: np.ndarray | None) -> np.ndarray:
         """The values (B,) of the user's event ``e`` at times ``t`` (B,) and states ``xi`` (B, k), ``G`` (B, q).

@@ -78,7 +78,8 @@ class Solution:
         ``Gamma = phi(-Theta(theta)) Gamma_k``: g in SO(n) and |Gamma| = 1 to rounding, the constraints exact,
         with the accuracy of the steps; NaN after a trajectory stopped. The steps are those of the original
         run (the solve is repeated with ``t`` as output times: a trajectory's steps do not depend on them).
-        A pickled or saved Solution keeps its arrays, not its dense output.
+        A pickled Solution keeps its dense output when its problem pickles (a system of module-level callables,
+        events that pickle); a saved one (npz, xarray) keeps its arrays only.
 
         Raises
         ------
@@ -88,14 +89,20 @@ class Solution:
         if self._dense is None:
             raise ValueError("sol.at(t) needs integrate(..., dense_output=True)")
         if self._dense is False:
-            raise ValueError("sol.at(t): this Solution was pickled or copied, and a copy keeps the arrays, not the "
-                             "dense output; call at() on the Solution integrate returned (or integrate again)")
+            raise ValueError("sol.at(t): this Solution was pickled or copied while its problem does not pickle (a "
+                             "lambda potential or event?): the copy keeps the arrays, not the dense output; call "
+                             "at() on the Solution integrate returned (or integrate again)")
         return self._dense(t)
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
-        if state["_dense"] is not None:  # the replay holds the solver and the problem: not part of the result
-            state["_dense"] = False  # (and at() says so)
+        if state["_dense"]:  # the replay (the problem: model, initial data, events) goes along if it pickles
+            import pickle
+
+            try:
+                pickle.dumps(state["_dense"])
+            except Exception:  # noqa: BLE001 - a lambda potential or event: the arrays still pickle
+                state["_dense"] = False  # (and at() says why it has no dense output)
         return state
 
     @property

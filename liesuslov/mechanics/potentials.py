@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._rows import rows_at
-from .._validation import as_float_array
+from .._validation import as_float_array, read_only
 
 __all__ = ["Potential", "ZeroPotential", "LinearPotential", "QuadraticPotential", "FamilyPotential",
            "GradientCheck", "check_gradient"]
@@ -83,11 +83,11 @@ class Potential:
 
     def V(self, Gamma) -> np.ndarray:
         """Value ``V(Gamma)``: (..., n) -> (...)."""
-        return real_values(self._V(np.asarray(Gamma, dtype=float)), "potential.V")
+        return real_values(self._V(read_only(Gamma)), "potential.V")
 
     def grad(self, Gamma) -> np.ndarray:
         """Gradient ``dV/dGamma``: (..., n) -> (..., n)."""
-        return real_values(self._grad(np.asarray(Gamma, dtype=float)), "potential.grad")
+        return real_values(self._grad(read_only(Gamma)), "potential.grad")
 
     def check_gradient(self, Gamma=None, **options) -> GradientCheck:
         """Shortcut for :func:`check_gradient` ``(self, Gamma, **options)``."""
@@ -230,13 +230,13 @@ class FamilyPotential(Potential):
         self.name = "FamilyPotential(v1, v2)"
 
     def V(self, Gamma) -> np.ndarray:
-        G = np.asarray(Gamma, dtype=float)
+        G = read_only(Gamma)  # its components go to the user's v1, v2
         g1, g2, g3 = G[..., 0], G[..., 1], G[..., 2]
         s3 = g3 * g3
         return real_values(self.v1(g1, g2 * g2 + s3) + self.v2(g2, g1 * g1 + s3), "v1 + v2")
 
     def grad(self, Gamma) -> np.ndarray:
-        G = np.asarray(Gamma, dtype=float)
+        G = read_only(Gamma)  # its components go to the user's dv1, dv2
         g1, g2, g3 = G[..., 0], G[..., 1], G[..., 2]
         s3 = g3 * g3
         v1s, v1r = (real_values(d, "dv1") for d in self.dv1(g1, g2 * g2 + s3))

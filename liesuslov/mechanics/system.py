@@ -412,7 +412,9 @@ def _probe_potential(potential: Potential, n: int) -> None:
         g = real_values(potential.grad(G), "potential.grad")
     except Exception as exc:  # noqa: BLE001 - re-raised with the context, a wrong type as a TypeError
         kind = TypeError if isinstance(exc, TypeError) else ValueError
-        raise kind(f"potential could not be evaluated on Gamma of shape {shape}: {exc}") from exc
+        why = " (a potential is given the integrator's Gamma read-only: compute on a copy)" \
+            if "read-only" in str(exc) else ""
+        raise kind(f"potential could not be evaluated on Gamma of shape {shape}: {exc}{why}") from exc
     if V.shape != (3, 1):
         raise ValueError(f"potential.V must map (..., {n}) to (...): got shape {V.shape} for input {shape}")
     if g.shape != (3, 1, n):
