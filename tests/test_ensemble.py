@@ -679,3 +679,249 @@ def test_an_event_with_parameters_of_the_whole_batch_names_itself_in_an_ensemble
     assert sol.events[0].t.size == 20
     with pytest.raises(ValueError, match=r"events\[0\] raised ValueError: .*called on a batch of shape \(20,\)"):
         ensemble(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", events=_clock_of_the_whole_batch)
+
+
+# ---------------------------------------------------------------------------- initial data read as integrate reads it
+def _se_system(n, constraints="none"):
+    alg = ls.se(n)
+    return ls.SuslovSystem(ls.Inertia(alg, np.diag(np.arange(1.0, alg.dim + 1.0))), constraints=constraints)
+
+
+def _chaplygin_sleigh():
+    """se(2) with the sleigh's knife edge: no sideways velocity, the covector (0, 0, 1) annihilates D."""
+    return _se_system(2, ls.Subspace.annihilator(ls.se(2), np.array([[0.0, 0.0, 1.0]])))
+
+
+def _se_matrices(system, shape, seed=0):
+    """Representation matrices (shape..., m, m) of random states in D."""
+    D = system.constraints
+    x = np.random.default_rng(seed).normal(size=shape + (system.algebra.dim,))
+    return system.algebra.hat(x if D is None else D.project(x))
+
+
+@pytest.mark.parametrize("scene", ["se2", "sleigh", "se3"])
+@pytest.mark.parametrize("chunk_size", [None, 1, 3])
+def test_representation_matrices_on_se_n_are_read_as_integrate_reads_them(scene, chunk_size):
+    """ensemble decided matrix-or-coordinates itself, taking only so(n) arrays for matrices: (5, 3, 3) se(2)
+    matrices became 15 trajectories of coordinates (success True), the sleigh's matrices were 'not in D', se(3)'s
+    (..., 4, 4) matrices were refused and one matrix crashed in a reshape."""
+    system = {"se2": lambda: _se_system(2), "sleigh": _chaplygin_sleigh, "se3": lambda: _se_system(3)}[scene]()
+    m = system.algebra.matrix_size
+    X = _se_matrices(system, (5,))
+    assert X.shape == (5, m, m)
+    for O in (X, X[0]):  # a batch of matrices, and one matrix (no batch axes)
+        sol = ls.integrate(system, O, (0.0, 1.0), t_eval=[0.0, 1.0], **ADAPTIVE)
+        ens = ensemble(system, O, (0.0, 1.0), chunk_size=chunk_size, **ADAPTIVE)
+        assert ens.omega.shape == (2,) + O.shape[:-2] + (system.algebra.dim,)
+        assert ens.status.shape == O.shape[:-2]
+        _assert_same(ens, sol)
+    if scene == "se3":  # with the attitudes g0 in SE(3), one per trajectory
+        rng = np.random.default_rng(3)
+        g0 = np.tile(np.eye(4), (5, 1, 1))
+        R = np.linalg.qr(rng.normal(size=(5, 3, 3)))[0]
+        g0[:, :3, :3] = R * np.sign(np.linalg.det(R))[:, None, None]  # (-R for a reflection R: a rotation)
+        g0[:, :3, 3] = rng.normal(size=(5, 3))
+        kw = dict(g0=g0, reconstruct=True, **ADAPTIVE)
+        sol = ls.integrate(system, X, (0.0, 1.0), t_eval=[0.0, 1.0], **kw)
+        _assert_same(ensemble(system, X, (0.0, 1.0), chunk_size=chunk_size, **kw), sol)
+
+
+#: Three states in the Suslov plane D of so(3) (Omega_12 = 0) whose coordinates, stacked, are a skew matrix.
+_SKEW_ROWS = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.7], [0.0, -0.7, 0.0]])
+
+
+def _skew_rows_sampler(rng, size):
+    """Omega0 repeating _SKEW_ROWS (coordinates), Gamma0 random: chunks of 3 from 0 are a (3, 3) skew array."""
+    G = rng.normal(size=(size, 3))
+    return {"Omega0": np.resize(_SKEW_ROWS, (size, 3)), "Gamma0": G / np.linalg.norm(G, axis=-1, keepdims=True)}
+
+
+def test_a_chunk_of_three_coordinate_vectors_is_not_read_as_one_matrix():
+    """On so(3) and se(2) (d = m = 3) a chunk of 3 trajectories is a (3, 3) array: 3 states that form a matrix of
+    the algebra (zero states, say) were read as one matrix by the chunk's integrate call."""
+    se2 = _se_system(2)
+    X = np.zeros((6, 3))  # coordinates: a (6, 3) batch of six states, three of them zero
+    X[3:] = np.random.default_rng(1).normal(size=(3, 3))
+    sol = ls.integrate(se2, X, (0.0, 1.0), t_eval=[0.0, 1.0], **ADAPTIVE)
+    _assert_same(ensemble(se2, X, (0.0, 1.0), chunk_size=3, **ADAPTIVE), sol)
+    # so(3) with Gamma and per-trajectory LinearEvent rows (split with the batch), and a sampler drawing such rows
+    system, Omega0, Gamma0 = _initial((6,))
+    Omega0[:3] = _SKEW_ROWS
+    assert np.allclose(system.constraints.project(Omega0), Omega0)
+    G = np.broadcast_to(Gamma0, (6, 3))
+    events = [ls.integrators.return_plane(system, Omega0 + 0.1 * system.constraints.basis[0], G),
+              ls.integrators.gamma_crossing(3, index=1)]
+    span = (0.0, 10.0)
+    sol = ls.integrate(system, Omega0, span, Gamma0=Gamma0, t_eval=list(span), events=events, **FIXED)
+    ens = ensemble(system, Omega0, span, Gamma0=Gamma0, chunk_size=3, events=events, **FIXED)
+    _assert_same(ens, sol)
+    for a, b in zip(ens.events, sol.events, strict=True):
+        assert a.t.size > 0 and np.array_equal(a.t, b.t) and np.array_equal(a.index, b.index)
+    drawn = draw(_skew_rows_sampler, 6, 4)
+    sol = ls.integrate(system, drawn["Omega0"], T_SPAN, Gamma0=drawn["Gamma0"], t_eval=list(T_SPAN), **FIXED)
+    _assert_same(ensemble(system, None, T_SPAN, sampler=_skew_rows_sampler, n=6, seed=4, chunk_size=3, **FIXED), sol)
+
+
+def test_the_so3_se2_ambiguity_is_integrate_s():
+    """A (3, 3) array on so(3) or se(2): one matrix when it is one (to rounding), else 3 coordinate vectors, and
+    refused when close to a matrix — whatever integrate decides, the ensemble decides (once, on the whole batch)."""
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])), constraints="none")
+    for alg_system in (system, _se_system(2)):
+        alg = alg_system.algebra
+        one = alg.hat(np.array([0.3, -0.2, 0.5]))
+        three = np.random.default_rng(2).normal(size=(3, 3))
+        for O in (one, three):
+            sol = ls.integrate(alg_system, O, (0.0, 1.0), t_eval=[0.0, 1.0], **FIXED)
+            for cs in (None, 1):
+                ens = ensemble(alg_system, O, (0.0, 1.0), chunk_size=cs, **FIXED)
+                assert ens.status.shape == sol.status.shape == (() if O is one else (3,))
+                _assert_same(ens, sol)
+        near = one + 1e-9 * three  # neither a matrix to rounding nor clearly three vectors
+        with pytest.raises(ValueError, match="ambiguous") as e1:
+            ls.integrate(alg_system, near, (0.0, 1.0), **FIXED)
+        with pytest.raises(ValueError, match="ambiguous") as e2:
+            ensemble(alg_system, near, (0.0, 1.0), **FIXED)
+        assert str(e1.value) == str(e2.value)
+
+
+def test_input_integrate_rejects_is_rejected_the_same_way():
+    """A complex Omega0 was cast to real with numpy's ComplexWarning and integrated; a boolean Gamma0 read as 0/1."""
+    import warnings
+
+    system, Omega0, Gamma0 = _initial()
+    good = dict(Gamma0=Gamma0, **FIXED)
+    cases = [((system, Omega0 + 1e-3j, T_SPAN), good, "Omega0"),
+             ((system, Omega0, T_SPAN), {**good, "Gamma0": np.array([False, False, True])}, "Gamma0"),
+             ((system, Omega0.tolist(), T_SPAN), {**good, "Gamma0": [0.0, 0.6 + 0j, 0.8]}, "Gamma0"),
+             ((_se_system(2), ls.se(2).hat(np.ones(3)) + 0j, T_SPAN), FIXED, "Omega0")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a cast would be a ComplexWarning, not the TypeError
+        for args, kw, word in cases:
+            with pytest.raises(TypeError, match=word) as e1:
+                ls.integrate(*args, **kw)
+            with pytest.raises(TypeError, match=word) as e2:
+                ensemble(*args, **kw)
+            assert str(e1.value) == str(e2.value)
+        with pytest.raises(TypeError, match="sampler's 'Omega0' must be real"):
+            ensemble(system, None, T_SPAN, sampler=_complex_sampler, n=4, seed=0, **FIXED)
+
+
+def _complex_sampler(rng, size):
+    return {"Omega0": np.zeros((size, 3)) + 0j, "Gamma0": np.tile([0.0, 0.6, 0.8], (size, 1))}
+
+
+# ---------------------------------------------------------------------------- store, reduce and seed errors
+def test_an_empty_store_path_is_refused_and_writes_nothing(tmp_path, monkeypatch):
+    """store="" wrote the shards and the manifest into the current directory (overwrite=True deleted chunks there)."""
+    system, Omega0, Gamma0 = _initial()
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "chunk-000000.npz").write_bytes(b"someone else's file")
+    for overwrite in (False, True):
+        with pytest.raises(ValueError, match="store must be a directory path, got the empty string"):
+            ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, store="", overwrite=overwrite, chunk_size=5, **FIXED)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["chunk-000000.npz"]
+
+
+def test_an_unusable_store_path_names_store(tmp_path):
+    system, Omega0, Gamma0 = _initial()
+    (tmp_path / "a_file").write_text("x")
+    bad = [tmp_path / "a_file" / "run"]  # under a file: was a bare NotADirectoryError
+    if Path("/proc/self").is_dir():
+        bad.append("/proc/liesuslov-store")  # a file system that takes no directories: was FileNotFoundError
+    for store in bad:
+        with pytest.raises(ValueError, match=r"store .* cannot be created as a directory .* pass a directory path"):
+            ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, store=store, **FIXED)
+
+
+def test_a_damaged_store_names_the_file_and_what_is_wrong(tmp_path):
+    """A corrupt manifest gave a raw JSONDecodeError, a missing key KeyError: 'bounds', a corrupt shard numpy's
+    advice to pass allow_pickle=True."""
+    import shutil
+
+    system, Omega0, Gamma0 = _initial()
+    good = tmp_path / "good"
+    ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, store=good, chunk_size=5, **FIXED)
+    man = json.loads((good / "manifest.json").read_text())
+
+    def damaged(name, edit):
+        d = tmp_path / name
+        shutil.copytree(good, d)
+        edit(d)
+        return d
+
+    cases = [
+        (damaged("not_json", lambda d: (d / "manifest.json").write_text("{not json")),
+         "manifest.json is not valid JSON"),
+        (damaged("a_list", lambda d: (d / "manifest.json").write_text("[1, 2]")), "manifest.json holds a JSON list"),
+        (damaged("no_bounds", lambda d: (d / "manifest.json").write_text(
+            json.dumps({k: v for k, v in man.items() if k != "bounds"}))), r"manifest.json lacks \['bounds'\]"),
+        (damaged("bad_bounds", lambda d: (d / "manifest.json").write_text(
+            json.dumps({**man, "bounds": [[0, 5], [7, 20]]}))), "bounds must be the chunks"),
+    ]
+    for store, match in cases:
+        with pytest.raises(ValueError, match=match) as err:
+            open_ensemble(store)
+        assert str(store) in str(err.value) and "overwrite=True" in str(err.value)
+    # a damaged shard: named when read (lazily, by a finished store; at once by a partial one, for its times)
+    shard = damaged("bad_shard", lambda d: (d / "chunk-000001.npz").write_bytes(b"garbage"))
+    ens = open_ensemble(shard)
+    for read in (lambda: ens.omega, lambda: ens.status, lambda: list(ens.chunks())):
+        with pytest.raises(ValueError, match="the shard chunk-000001.npz is damaged") as err:
+            read()
+        assert "allow_pickle" not in str(err.value)
+    partial = damaged("partial", lambda d: ((d / "chunk-000000.npz").write_bytes(b"\x00" * 10),
+                                           (d / "manifest.json").write_text(json.dumps(
+                                               {k: v for k, v in man.items() if k not in ("t", "tails")}))))
+    with pytest.raises(ValueError, match="the shard chunk-000000.npz is damaged"):
+        open_ensemble(partial)
+
+
+class CountingBadReduce:
+    """A reduce that returns 42 instead of a Solution, counting its calls."""
+
+    def __init__(self):
+        self.calls = 0
+
+    def __call__(self, sol):
+        self.calls += 1
+        return 42
+
+
+def _drop_a_trajectory(sol):
+    from dataclasses import replace
+
+    return replace(sol, xi=sol.xi[:, 1:], omega=sol.omega[:, 1:], Gamma=sol.Gamma[:, 1:], status=sol.status[1:])
+
+
+def test_a_reduce_that_returns_no_solution_is_bad_input_raised_at_once(tmp_path):
+    """It was taken for a numerical failure: status -1 everywhere, "AttributeError: 'int' object has no attribute
+    't'" in the message, after every chunk had run."""
+    system, Omega0, Gamma0 = _initial()
+    for in_flight in (None, 1):  # (the default: 3 chunks in flight, run before the first result is looked at)
+        bad = CountingBadReduce()
+        with pytest.raises(TypeError, match="reduce must return a Solution .* returned int"):
+            ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, chunk_size=2, reduce=bad, store=tmp_path / "s",
+                     overwrite=True, max_in_flight=in_flight, **FIXED)
+        # the first chunk's result raised it: of the 10 chunks, only those already in flight ran
+        assert bad.calls == (3 if in_flight is None else 1)
+    with pytest.raises(ValueError, match="reduce must keep the chunk's trajectories"):
+        ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, chunk_size=4, reduce=_drop_a_trajectory, **FIXED)
+
+
+@pytest.mark.parametrize("seed, exc", [("x", TypeError), (-1, ValueError), (True, TypeError), (1.5, TypeError),
+                                       ([1, -2], ValueError), ([], TypeError)])
+def test_a_bad_seed_names_seed(seed, exc):
+    """numpy's messages ("SeedSequence expects int or sequence of ints...", "expected non-negative integer") did
+    not name the argument."""
+    system = _system()
+    with pytest.raises(exc, match="seed must be None, an integer >= 0"):
+        ensemble(system, None, T_SPAN, sampler=uniform_sampler, n=5, seed=seed, **FIXED)
+    with pytest.raises(exc, match="seed must be"):
+        draw(uniform_sampler, 5, seed)
+
+
+def test_good_seeds_still_work():
+    a = draw(uniform_sampler, 5, [1, 2])
+    b = draw(uniform_sampler, 5, np.random.SeedSequence([1, 2]))
+    assert np.array_equal(a["Omega0"], b["Omega0"])
+    assert np.array_equal(draw(uniform_sampler, 5, np.int64(3))["Omega0"], draw(uniform_sampler, 5, 3)["Omega0"])

@@ -15,7 +15,8 @@ _SUMMED = ("nfev", "steps", "rejected")
 _STAT = "stats__"  # shard key prefix of a per-trajectory statistic (e.g. stats__trajectory_steps)
 _EVENT = "event__"  # shard key prefix of event crossings: event__{j}__{t,index,omega,Gamma,g} (index global)
 _EVENT_FIELDS = ("t", "index", "omega", "Gamma", "g")
-_CORE = {"Omega0": None, "Gamma0": 1, "g0": 2}  # trailing (non-batch) axes; Omega0's is 1 or 2
+# trailing (non-batch) axes of the initial data a chunk carries: Omega0 always as coordinates (..., d)
+_CORE = {"Omega0": 1, "Gamma0": 1, "g0": 2}
 # Exceptions a task raises on bad input: deterministic, so they are raised here, never retried.
 _USER_ERRORS = (ValueError, TypeError)
 

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+import zipfile
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +17,24 @@ from .constants import (
     _STAT,
     _shard_name,
 )
+
+
+# ====================================================================== reading a shard
+@contextmanager
+def _read_shard(path: Path):
+    """``np.load`` of a store's shard, a damaged one (truncated, overwritten, not an .npz) a ValueError naming it.
+
+    numpy's own message for a file that is not an .npz suggests ``allow_pickle=True``, which is wrong here: a
+    shard holds no object arrays. Reading a member lazily (``z[key]``) can fail as well, so the whole ``with``
+    body is covered: keep it to reading the shard.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            yield z
+    except (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"store {str(path.parent)!r}: the shard {path.name} is damaged or not written by ensemble "
+                         f"({type(exc).__name__} reading it); delete it (its trajectories then read as missing) "
+                         "or run the ensemble again with overwrite=True") from exc
 
 
 # ====================================================================== the result
@@ -124,7 +144,7 @@ class Ensemble:
         out = np.full(self._B, np.nan if dt.kind == "f" else 0, dtype=dt)
         for i, (a, b) in enumerate(self._bounds):
             if self._has(i):
-                with np.load(self._shard(i), allow_pickle=False) as z:
+                with _read_shard(self._shard(i)) as z:
                     if _STAT + name in z.files:
                         out[a:b] = z[_STAT + name]
         return out
@@ -141,7 +161,7 @@ class Ensemble:
             parts = []
             for i in range(len(self._bounds)):
                 if self._has(i):
-                    with np.load(self._shard(i), allow_pickle=False) as z:
+                    with _read_shard(self._shard(i)) as z:
                         parts.append({k: z[k] for k in z.files if k.startswith(_EVENT)})
         out = []
         for j in range(self._n_events):
@@ -165,7 +185,7 @@ class Ensemble:
         st = np.full(self._B, -1, dtype=np.int64)
         for i, (a, b) in enumerate(self._bounds):
             if self._has(i):
-                with np.load(self._shard(i), allow_pickle=False) as z:
+                with _read_shard(self._shard(i)) as z:
                     st[a:b] = z["status"]
         return st.reshape(self.batch_shape)
 
@@ -196,7 +216,7 @@ class Ensemble:
         out = np.full((self._t.size, self._B) + self._tails[name], np.nan)
         for i, (a, b) in enumerate(self._bounds):
             if self._has(i):
-                with np.load(self._shard(i), allow_pickle=False) as z:
+                with _read_shard(self._shard(i)) as z:
                     if name in z.files:
                         out[:, a:b] = z[name]
         return out.reshape((self._t.size,) + self.batch_shape + self._tails[name])
@@ -211,8 +231,9 @@ class Ensemble:
                 flat["status"] = self.status.reshape(-1)[a:b]
                 yield a, b, flat
             elif self._has(i):
-                with np.load(self._shard(i), allow_pickle=False) as z:
-                    yield a, b, {k: z[k] for k in (*_ARRAYS, "status") if k in z.files}
+                with _read_shard(self._shard(i)) as z:  # read, then yield outside: the caller's errors are its own
+                    arrays = {k: z[k] for k in (*_ARRAYS, "status") if k in z.files}
+                yield a, b, arrays
 
     def to_solution(self):
         """All of it as a :class:`~liesuslov.Solution` (in memory)."""

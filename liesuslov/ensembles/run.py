@@ -13,8 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import check_t_eval, check_t_span
+from .._validation import as_float_array, check_t_eval, check_t_span
+from ..integrators.integrate import _initial_data
 from ..integrators.problem import run_message
+from ..mechanics.protocol import ModelProtocol
+from ..mechanics.system import SuslovSystem
 from .checks import _nonneg_int, _positive_int
 from .constants import (
     _ARRAYS,
@@ -49,9 +52,10 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
         there a potential built from lambdas works. Every other executor (a process pool, loky, an MPI
         pool, a Dask client, or one not known here) is taken to pickle what it is sent; the same holds
         for ``sampler`` and ``reduce``, and what does not pickle is a TypeError naming it before anything runs.
-    Omega0 : array_like, shape (..., n, n) or (..., d), optional
-        Initial data as for :func:`~liesuslov.integrate`; the batch axes of ``Omega0``, ``Gamma0`` and
-        ``g0`` broadcast together. None with a ``sampler``.
+    Omega0 : array_like, shape (..., m, m) or (..., d), optional
+        Initial data as for :func:`~liesuslov.integrate`, read and checked once on the whole batch by its
+        code (representation matrices on so(n), se(2), se(3), or coordinates, by its rule); the batch axes of
+        ``Omega0``, ``Gamma0`` and ``g0`` broadcast together. None with a ``sampler``.
     t_span : (t0, t1)
     Gamma0 : array_like, shape (..., n), optional
     g0 : array_like, shape (..., m, m), optional
@@ -66,7 +70,8 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
         pickled (the compiled kernel releases the GIL; numpy code on small arrays mostly holds it).
     store : str or PathLike, optional
         A directory the results stream to (created; an existing store is refused unless
-        ``overwrite=True``). The returned Ensemble then reads from it lazily.
+        ``overwrite=True``; ``""`` is refused: pass ``"."`` for the current directory). The returned
+        Ensemble then reads from it lazily.
     sampler : callable, optional
         A module-level callable (or :class:`Perturbation`) ``sampler(rng, size) -> dict`` with
         ``"Omega0"`` (size, ...) and optionally ``"Gamma0"``, ``"g0"``, called on the workers: block ``j``
@@ -75,13 +80,14 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
         ``Gamma0``/``g0`` given here (one value each) are used when the sampler does not return them.
     n : int
         Number of trajectories drawn by ``sampler`` (only with a sampler).
-    seed : int, SeedSequence or None
+    seed : int >= 0, sequence of them, SeedSequence or None
         Root of the sampler's seeds (None: fresh entropy, recorded in ``stats["seed"]``).
     reduce : None, "final" or callable
         Done on the workers before results travel: None keeps every output time; ``"final"`` keeps
         only the last one (time axis of length 1; NaN for a trajectory a terminal event stopped
         earlier, as in the Solution); a module-level callable ``reduce(sol) -> Solution`` (same batch
-        axes, the same times for every chunk) anything else.
+        axes, the same times for every chunk) anything else; returning anything but a Solution is a
+        TypeError naming ``reduce``, raised by the first chunk that does.
     progress : bool
         A progress bar over trajectories (needs tqdm: ``liesuslov[progress]``).
     retries : int
@@ -106,14 +112,20 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     Raises
     ------
     ValueError, TypeError
-        Bad arguments, naming the argument (also a bad initial state found by a worker).
+        Bad arguments, naming the argument (also a bad initial state drawn on a worker); a store path that
+        cannot be a directory is a ValueError naming ``store``.
+    OSError
+        A store directory the system will not let this process write (its class, ``store`` named).
     """
     from ..integrators import integrate
 
     t0, t1 = check_t_span(t_span)
     t_eval = np.array([t0, t1]) if t_eval is None else check_t_eval(t_eval, t0, t1)
-    if "alg" in options or not hasattr(system, "algebra"):
-        raise TypeError(f"system must be a SuslovSystem (or a model), got {type(system).__name__}")
+    # integrate's own test (_initial_data needs to know which of the two it is given)
+    is_model = not isinstance(system, SuslovSystem) and isinstance(system, ModelProtocol)
+    if not (isinstance(system, SuslovSystem) or is_model):
+        raise TypeError(f"system must be a SuslovSystem (or a model such as system.model()), "
+                        f"got {type(system).__name__}")
     allowed = set(inspect.signature(integrate).parameters) - {"system", "Omega0", "t_span", "Gamma0", "g0", "t_eval",
                                                               "progress"}
     unknown = sorted(set(options) - allowed)
@@ -144,22 +156,18 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
             raise ValueError("n (the number of trajectories to draw) is required with sampler=...")
         batch_shape = (_positive_int(n, "n"),)
         seed_parts = _seed_parts(seed)
+        # the drawn states are checked by integrate on the workers; these two here, with integrate's helper
         for key, v in (("Gamma0", Gamma0), ("g0", g0)):
             if v is not None:
-                init[key] = _as_array(v, key, _CORE[key])
-        cores = {k: _CORE[k] for k in init}
-        _broadcast_batch(init, cores, batch_shape)
+                init[key] = as_float_array(v, key, ndim_min=_CORE[key])
+        _broadcast_batch(init, batch_shape)
     else:
         if Omega0 is None:
             raise ValueError("Omega0 is required (or draw initial data with sampler=... and n=...)")
         if n is not None or seed is not None:
             raise ValueError("n and seed are used only with sampler=...; the batch is the shape of Omega0")
-        init["Omega0"] = _as_array(Omega0, "Omega0", 1)
-        for key, v in (("Gamma0", Gamma0), ("g0", g0)):
-            if v is not None:
-                init[key] = _as_array(v, key, _CORE[key])
-        cores = {k: (_omega_core(system, init[k]) if k == "Omega0" else _CORE[k]) for k in init}
-        batch_shape = _broadcast_batch(init, cores, None)
+        init, batch_shape = _given_initial_data(system, is_model, Omega0, Gamma0, g0, options)
+    cores = {k: _CORE[k] for k in init}
     B = math.prod(batch_shape)
     if B == 0:
         raise ValueError(f"the batch of initial data is empty (batch shape {batch_shape})")
@@ -196,7 +204,10 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     manifest = {"format": FORMAT, "batch_shape": list(batch_shape), "bounds": bounds, "complete": False,
                 "chunk_size": chunk_size, "t_span": [t0, t1], "stats": run_stats}
     if root is not None:
-        _write_manifest(root, manifest)
+        try:
+            _write_manifest(root, manifest)
+        except OSError as exc:  # a directory that exists but takes no files (permissions, a read-only disk)
+            raise _store_error(root, exc) from exc
 
     def make_task(i: int) -> _Task:
         a, b = bounds[i]
@@ -377,45 +388,41 @@ def _fallback_tails(system, init: dict, sampler, options: dict) -> dict[str, tup
 
 
 # ====================================================================== validation helpers
-def _as_array(v, name: str, core: int) -> np.ndarray:
-    if v is None:
-        raise TypeError(f"{name} must be an array, got None")
+def _given_initial_data(system, is_model, Omega0, Gamma0, g0, options) -> tuple[dict, tuple[int, ...]]:
+    """The whole batch's initial data, read and checked by integrate's own code (``_initial_data``), for the chunks.
+
+    Omega0 travels as the coordinates integrate reads off it on the whole batch (matrices or coordinates, the
+    so(3)/se(2) ambiguity and the constraints decided once, by integrate's rule, not per chunk); Gamma0 and g0 as
+    the float arrays the user gave (checked here): integrate normalises Gamma0 per trajectory on each chunk, as it
+    would on the whole batch, so the numbers are the same bit for bit.
+    """
+    reconstruct, form = options.get("reconstruct", False), options.get("form", "auto")
+    # integrate tests these types before it reads the initial data; so does the ensemble, with its messages
+    if not isinstance(reconstruct, (bool, np.bool_)):
+        raise TypeError(f"reconstruct must be True or False, got {type(reconstruct).__name__}")
+    if not isinstance(form, str):
+        raise TypeError(f"form must be a string, got {type(form).__name__}")
+    _, x0, _, _, batch_shape = _initial_data(system, is_model, Omega0, Gamma0, g0, bool(reconstruct), form)
+    init = {"Omega0": x0}
+    # already checked by _initial_data: only the conversion (no copy of a float array)
+    if Gamma0 is not None:
+        init["Gamma0"] = as_float_array(Gamma0, "Gamma0")
+    if g0 is not None:
+        init["g0"] = as_float_array(g0, "g0")
+    return init, tuple(batch_shape)
+
+
+def _broadcast_batch(init: dict, batch_shape: tuple[int, ...]) -> None:
+    """Gamma0 and g0 given with a sampler: one value each, or ``n`` of them."""
+    shapes = {k: v.shape[:v.ndim - _CORE[k]] for k, v in init.items()}
     try:
-        a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be an array of numbers, got {type(v).__name__}") from exc
-    if a.ndim < core:
-        raise ValueError(f"{name} must have at least {core} axes, got shape {a.shape}")
-    return a
-
-
-def _omega_core(system, O: np.ndarray) -> int:
-    """Trailing axes of Omega0 (2: matrices, 1: coordinates), by integrate's rule."""
-    alg = system.algebra
-    m = getattr(alg, "matrix_size", None)
-    if alg.name.startswith("so(") and O.ndim >= 2 and O.shape[-2:] == (m, m):
-        scale = max(1.0, float(np.abs(O).max()) if O.size else 1.0)
-        if np.allclose(O, -np.swapaxes(O, -1, -2), rtol=0, atol=1e-12 * scale) or alg.dim != m:
-            return 2
-    if O.shape[-1] != alg.dim:
-        raise ValueError(f"Omega0 must have shape (..., {alg.dim}) (coordinates)"
-                         + (f" or (..., {m}, {m}) (skew matrices)" if alg.name.startswith("so(") else "")
-                         + f", got {O.shape}")
-    return 1
-
-
-def _broadcast_batch(init: dict, cores: dict, batch_shape) -> tuple[int, ...]:
-    shapes = {k: v.shape[:v.ndim - cores[k]] for k, v in init.items()}
-    try:
-        out = np.broadcast_shapes(*shapes.values(), *([batch_shape] if batch_shape is not None else []))
+        out = np.broadcast_shapes(*shapes.values(), batch_shape)
     except ValueError as exc:
         what = ", ".join(f"{k}: {s}" for k, s in shapes.items())
-        raise ValueError(f"the batch axes of the initial data do not broadcast ({what}"
-                         + (f", n: {batch_shape}" if batch_shape is not None else "") + ")") from exc
-    if batch_shape is not None and out != tuple(batch_shape):
+        raise ValueError(f"the batch axes of the initial data do not broadcast ({what}, n: {batch_shape})") from exc
+    if out != tuple(batch_shape):
         raise ValueError(f"with a sampler, Gamma0 and g0 must be one value each (or n of them), got batch "
                          f"axes {shapes}")
-    return tuple(out)
 
 
 def _take(a: np.ndarray, core: int, batch_shape: tuple[int, ...], start: int, stop: int) -> np.ndarray:
@@ -470,20 +477,45 @@ def _check_bookkeeping(B: int) -> None:
 
 
 def _prepare_store(store, overwrite: bool) -> Path:
-    if not isinstance(store, (str, os.PathLike)):
+    if not isinstance(store, (str, os.PathLike)) or not isinstance(os.fspath(store), str):
         raise TypeError(f"store must be None or a directory path (str or os.PathLike), got {type(store).__name__}")
+    if os.fspath(store) == "":
+        # Path("") is the current directory: the shards and the manifest would land there (and overwrite=True
+        # would delete chunk files there); an empty string is most likely an unset variable, not a choice
+        raise ValueError("store must be a directory path, got the empty string; pass a directory such as "
+                         "'runs/ensemble' (or '.' to write into the current directory)")
     root = Path(store)
     if root.exists() and not root.is_dir():
         raise ValueError(f"store {str(root)!r} exists and is not a directory; pass a directory path")
-    if (root / MANIFEST).exists():
-        if not overwrite:
-            raise ValueError(f"store {str(root)!r} already holds an ensemble; pass overwrite=True to replace it, "
-                             "or another directory")
-        for p in [*root.glob("chunk-*.npz"), *root.glob(".chunk-*.npz")]:  # (the latter: shards cut off mid-write)
-            p.unlink()
-        (root / MANIFEST).unlink()
-    root.mkdir(parents=True, exist_ok=True)
+    try:
+        if (root / MANIFEST).exists():
+            if not overwrite:
+                raise ValueError(f"store {str(root)!r} already holds an ensemble; pass overwrite=True to replace "
+                                 "it, or another directory")
+            for p in [*root.glob("chunk-*.npz"), *root.glob(".chunk-*.npz")]:  # (the latter: cut off mid-write)
+                p.unlink()
+            (root / MANIFEST).unlink()
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _store_error(root, exc) from exc
     return root
+
+
+def _store_error(root: Path, exc: OSError) -> Exception:
+    """The error of a store directory that cannot be created or written, naming ``store`` and the fix.
+
+    A path that cannot be a directory (a part of it is a file, or a file system such as /proc that takes no new
+    directories) is bad input: ValueError. Other causes (permissions, a full or read-only disk) are the
+    system's: the same OSError subclass and errno, with the argument named in the message.
+    """
+    where = f"store {str(root)!r}"
+    if isinstance(exc, (NotADirectoryError, FileExistsError, FileNotFoundError)):
+        return ValueError(f"{where} cannot be created as a directory ({exc.strerror or exc}: a part of the path is "
+                          "a file, or the file system takes no new directories there); pass a directory path "
+                          "you can write to")
+    message = (f"{where} cannot be written ({exc.strerror or exc}); pass a directory you can write to, or free "
+               "space on its disk")
+    return type(exc)(message) if exc.errno is None else type(exc)(exc.errno, message, exc.filename)
 
 
 def _progress_bar(on: bool, total: int):

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import as_float_array
 from .checks import _positive_int
 from .constants import (
     _INIT_KEYS,
@@ -78,8 +79,36 @@ class Perturbation:
 
 def _seed_parts(seed) -> tuple[Any, tuple[int, ...], int]:
     """(entropy, spawn_key, pool_size) of ``SeedSequence(seed)``: workers rebuild block ``j``'s child."""
-    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(_check_seed(seed))
     return ss.entropy, tuple(ss.spawn_key), ss.pool_size
+
+
+def _check_seed(seed):
+    """``seed`` as ``SeedSequence`` takes it (None, an integer >= 0 or a sequence of them), else a clear error.
+
+    numpy's own messages ("SeedSequence expects int or sequence of ints for entropy not x", "expected
+    non-negative integer") do not say which argument; a bool would be read as 0 or 1.
+    """
+    want = "seed must be None, an integer >= 0, a sequence of them or a numpy.random.SeedSequence"
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)):
+        raise TypeError(f"{want}, got the boolean {seed!r}")
+    if isinstance(seed, (int, np.integer)):
+        if seed < 0:
+            raise ValueError(f"{want}, got {seed}; pass a non-negative integer")
+        return int(seed)
+    if isinstance(seed, (str, bytes)):
+        raise TypeError(f"{want}, got the string {seed!r}; pass an integer such as 12345")
+    try:
+        values = list(seed)
+    except TypeError:
+        raise TypeError(f"{want}, got {type(seed).__name__}") from None
+    if not values or any(isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) for v in values):
+        raise TypeError(f"{want}, got {seed!r}; a sequence must hold integers (at least one)")
+    if any(v < 0 for v in values):
+        raise ValueError(f"{want}, got {seed!r}; every integer of a sequence must be >= 0")
+    return [int(v) for v in values]
 
 
 def _draw_range(sampler, seed_parts, start: int, stop: int, block: int) -> dict[str, np.ndarray]:
@@ -98,7 +127,8 @@ def _draw_range(sampler, seed_parts, start: int, stop: int, block: int) -> dict[
             raise ValueError(f"sampler returned unknown keys {sorted(extra)}; allowed: {list(_INIT_KEYS)}")
         lo, hi = max(start, j * block) - j * block, min(stop, (j + 1) * block) - j * block
         for k, v in drawn.items():
-            v = np.asarray(v, dtype=float)
+            # integrate's conversion: complex or boolean draws are a TypeError, not silently cast
+            v = as_float_array(v, f"sampler's {k!r}", finite=False)
             if v.ndim == 0 or v.shape[0] != block:
                 raise ValueError(f"sampler(rng, size) must return arrays with a leading axis of length size "
                                  f"({block}); {k!r} has shape {v.shape}")
@@ -116,7 +146,7 @@ def draw(sampler: Callable, n: int, seed=None, *, start: int = 0, stop: int | No
         ``sampler(rng, size) -> {"Omega0": (size, ...), "Gamma0": (size, n), "g0": (size, m, m)}``.
     n : int
         Number of trajectories.
-    seed : int, SeedSequence or None
+    seed : int >= 0, sequence of them, SeedSequence or None
         As passed to :func:`ensemble` (None is not reproducible: pass the ``stats["seed"]`` of a run).
     start, stop : int
         Only trajectories ``[start, stop)`` (default all ``n``).

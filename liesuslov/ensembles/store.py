@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -20,7 +21,7 @@ from .constants import (
     MANIFEST,
     _shard_name,
 )
-from .result import Ensemble
+from .result import Ensemble, _read_shard
 
 
 # ====================================================================== the store
@@ -39,8 +40,11 @@ def _merge_stats(chunk_stats: list[dict]) -> dict:
 
 
 def _read_meta(path: Path) -> dict:
-    with np.load(path, allow_pickle=False) as z:
-        return json.loads(z["__meta__"].tobytes().decode())
+    with _read_shard(path) as z:  # (a damaged meta is a damaged shard: the ValueError names it)
+        meta = json.loads(z["__meta__"].tobytes().decode())
+        if not isinstance(meta, dict):
+            raise ValueError(f"__meta__ is a JSON {type(meta).__name__}, not an object")
+    return meta
 
 
 def _atomic_write(path: Path, write: Callable[[Any], None]) -> None:
@@ -76,6 +80,42 @@ def _write_shard(store: Path, i: int, payload: dict) -> None:
     _atomic_write(store / _shard_name(i), lambda f: np.savez(f, **arrays, __meta__=meta))
 
 
+def _read_manifest(root: Path, path: Path) -> dict:
+    """The manifest, checked enough that reading the store cannot fail on it with a raw KeyError or TypeError."""
+    where = f"store {str(root)!r}: {MANIFEST}"
+    # ensemble writes it atomically, so it was damaged or edited afterwards: only a new run restores it
+    fix = "run the ensemble again with overwrite=True"
+    try:
+        man = json.loads(path.read_bytes().decode("utf-8"))
+    except OSError as exc:  # the OS's reason (permissions, ...): its own class, the argument named
+        message = f"{where} cannot be read ({exc.strerror or exc}); pass a store you can read"
+        raise (type(exc)(message) if exc.errno is None else type(exc)(exc.errno, message, exc.filename)) from exc
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{where} is not valid JSON ({exc}); the file is damaged: {fix}") from exc
+    if not isinstance(man, dict):
+        raise ValueError(f"{where} holds a JSON {type(man).__name__}, not an object; the file is damaged: {fix}")
+    if man.get("format") != FORMAT:
+        raise ValueError(f"store {str(root)!r}: unknown format {man.get('format')!r} (expected {FORMAT!r})")
+    missing = [k for k in ("batch_shape", "bounds") if k not in man]
+    if missing:
+        raise ValueError(f"{where} lacks {missing}; the file is damaged: {fix}")
+    shape, bounds = man["batch_shape"], man["bounds"]
+    if not (isinstance(shape, list) and all(type(b) is int and b >= 0 for b in shape)):
+        raise ValueError(f"{where}: batch_shape must be a list of integers >= 0, got {shape!r}; {fix}")
+    B = math.prod(shape)
+    ok = isinstance(bounds, list) and all(isinstance(ab, list) and len(ab) == 2 and all(type(v) is int for v in ab)
+                                          for ab in bounds)
+    # the chunks cover the batch in order: [0, b0), [b0, b1), ..., [., B)
+    if not (ok and [a for a, _ in bounds] == [0] + [b for _, b in bounds[:-1]] and all(a < b for a, b in bounds)
+            and (bounds[-1][1] if bounds else 0) == B):
+        raise ValueError(f"{where}: bounds must be the chunks [start, stop) covering the batch of {B} in order, got "
+                         f"{str(bounds)[:80]}; {fix}")
+    for key in ("stats", "meta", "tails"):
+        if man.get(key) is not None and not isinstance(man[key], dict):
+            raise ValueError(f"{where}: {key} must be a JSON object, got {type(man[key]).__name__}; {fix}")
+    return man
+
+
 def open_ensemble(store) -> Ensemble:
     """Reopen the ensemble stored in a directory (finished or partial), reading arrays lazily.
 
@@ -101,7 +141,8 @@ def open_ensemble(store) -> Ensemble:
     FileNotFoundError
         If ``store`` holds no ``manifest.json``.
     ValueError
-        If the manifest is of another format, or no chunk has finished yet.
+        If the manifest is of another format, damaged (not JSON, keys missing or malformed), or no chunk has
+        finished yet; a damaged shard is a ValueError naming it when it is read.
     """
     if not isinstance(store, (str, os.PathLike)):
         raise TypeError(f"store must be a path (str or os.PathLike), got {type(store).__name__}")
@@ -110,9 +151,7 @@ def open_ensemble(store) -> Ensemble:
     if not path.is_file():
         raise FileNotFoundError(f"store {str(root)!r} holds no {MANIFEST}: not an ensemble store (or the run "
                                 "has not started); pass the directory given as ensemble(..., store=DIR)")
-    man = json.loads(path.read_text())
-    if man.get("format") != FORMAT:
-        raise ValueError(f"store {str(root)!r}: unknown format {man.get('format')!r} (expected {FORMAT!r})")
+    man = _read_manifest(root, path)
     bounds = man["bounds"]
     present = [(root / _shard_name(i)).is_file() for i in range(len(bounds))]
     first = next((i for i, p in enumerate(present) if p), None)
@@ -120,7 +159,7 @@ def open_ensemble(store) -> Ensemble:
     if t is None or tails is None:  # the run stopped before its end: read them off a finished shard
         if first is None:
             raise ValueError(f"store {str(root)!r}: no chunk has finished yet (0 of {len(bounds)}); nothing to read")
-        with np.load(root / _shard_name(first), allow_pickle=False) as z:
+        with _read_shard(root / _shard_name(first)) as z:
             t = z["t"]
             tails = {k: z[k].shape[2:] for k in _ARRAYS if k in z.files}
         meta = _read_meta(root / _shard_name(first))
@@ -142,7 +181,7 @@ def open_ensemble(store) -> Ensemble:
     if traj_stats is None:
         traj_stats = {}
         if first is not None:
-            with np.load(root / _shard_name(first), allow_pickle=False) as z:
+            with _read_shard(root / _shard_name(first)) as z:
                 traj_stats = {k[len(_STAT):]: z[k].dtype.str for k in z.files if k.startswith(_STAT)}
     return Ensemble(t=t, batch_shape=man["batch_shape"], bounds=bounds, tails=tails, stats=stats,
                     n=meta.get("n"), algebra_name=meta.get("algebra_name", ""), message=message,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -56,12 +57,28 @@ def _run_chunk(task: _Task) -> dict[str, Any]:
 def _integrate_chunk(task: _Task) -> dict[str, Any]:
     from ..integrators import integrate
 
-    init = task.init if task.sampler is None else {
-        **(task.init or {}), **_draw_range(task.sampler, task.seed_parts, task.start, task.stop, task.block)}
     c = task.stop - task.start
+    init = dict(task.init or {})
+    if task.sampler is not None:
+        drawn = _draw_range(task.sampler, task.seed_parts, task.start, task.stop, task.block)
+        drawn["Omega0"] = _sampled_coordinates(task.system, drawn["Omega0"], c)
+        init.update(drawn)
+    events = task.options.get("events")
+    # Omega0 is given as coordinates (c, d). integrate reads a trailing (m, m) block that lies in the image of the
+    # representation as one matrix: on so(3) and se(2) (d = m = 3) a chunk of 3 trajectories would be (3, 3),
+    # and 3 coordinate vectors that happen to form such a matrix (three zero states, say) would be read as one.
+    # That chunk gets a batch (3, 1), unambiguous, and its solution is flattened back to (3,) below.
+    alg = task.system.algebra
+    column = c == alg.dim and c == getattr(alg, "matrix_size", None)
+    if column:
+        init = {k: v[:, None] for k, v in init.items()}
+        events = _events_column(events)
+    options = dict(task.options) if events is None else {**task.options, "events": events}
     sol = integrate(task.system, init["Omega0"], task.t_span, Gamma0=init.get("Gamma0"), g0=init.get("g0"),
-                    t_eval=task.t_eval, **task.options)
-    sol = _apply_reduce(sol, task.reduce)
+                    t_eval=task.t_eval, **options)
+    if column:
+        sol = _flat_batch(sol, c)
+    sol = _apply_reduce(sol, task.reduce, c)
     out: dict[str, Any] = {"t": np.asarray(sol.t, dtype=float)}
     for name in _ARRAYS:
         a = getattr(sol, name, None)
@@ -88,12 +105,63 @@ def _integrate_chunk(task: _Task) -> dict[str, Any]:
     return out
 
 
+def _sampled_coordinates(system, Omega0, c: int) -> np.ndarray:
+    """A sampler's Omega0 (c, d) coordinates or (c, m, m) matrices as coordinates (c, d), read by integrate's rule.
+
+    The leading axis is the batch (one state per drawn trajectory): a singleton axis after it keeps integrate's
+    reading (:func:`~liesuslov.algebra.elements.omega_coordinates`) from taking 3 coordinate vectors on so(3) or
+    se(2) for one matrix.
+    """
+    from ..algebra.elements import omega_coordinates
+
+    alg = system.algebra
+    x = omega_coordinates(alg, Omega0[:, None], "Omega0 (drawn by the sampler)")
+    if x.shape != (c, 1, alg.dim):
+        m = getattr(alg, "matrix_size", None)
+        mats = f" or (size, {m}, {m}) matrices of {alg.name}" if m is not None else ""
+        raise ValueError(f"sampler must return 'Omega0' of shape (size, {alg.dim}) coordinates{mats}, got "
+                         f"{Omega0.shape} for size {c}")
+    return x[:, 0]
+
+
+def _events_column(events):
+    """``events`` for a chunk integrated with the batch (c, 1): per-trajectory LinearEvent rows as (c, 1, ...)."""
+    from ..integrators.events import LinearEvent
+
+    def col(a, core: int):
+        return a if a is None or a.ndim <= core else a[:, None]
+
+    def one(e):
+        if not isinstance(e, LinearEvent):
+            return e
+        return LinearEvent(omega=col(e.omega, 1), Gamma=col(e.Gamma, 1), g=col(e.g, 2), offset=col(e.offset, 0),
+                           terminal=e.terminal, direction=e.direction)
+
+    if events is None:
+        return None
+    return [one(e) for e in events] if isinstance(events, (list, tuple)) else one(events)
+
+
+def _flat_batch(sol, c: int):
+    """A solution of the batch (c, 1) as one of (c,): the arrays, the status and the per-trajectory statistics."""
+    from dataclasses import replace
+
+    def flat(a, tail: int):
+        return None if a is None else a.reshape((a.shape[0], c) + a.shape[a.ndim - tail:])
+
+    stats = {k: (v.reshape(c) if isinstance(v, np.ndarray) and v.shape == (c, 1) else v) for k, v in sol.stats.items()}
+    status = np.asarray(sol.status).reshape(c) if np.ndim(sol.status) else sol.status
+    return replace(sol, xi=flat(sol.xi, 1), omega=flat(sol.omega, 1), Gamma=flat(sol.Gamma, 1), g=flat(sol.g, 2),
+                   status=status, stats=stats)
+
+
 def _batch_ndim(a: np.ndarray, sol) -> int:
     """Number of batch axes of a solution array (between the time axis and the component axes)."""
     return sol.omega.ndim - 2  # omega is (N, ..., d): the batch axes are shared by all arrays
 
 
-def _apply_reduce(sol, reduce):
+def _apply_reduce(sol, reduce, c: int):
+    """``reduce`` applied to a chunk's solution (c trajectories); a callable must give a Solution of the c."""
     if reduce is None:
         return sol
     if reduce == "final":
@@ -101,4 +169,15 @@ def _apply_reduce(sol, reduce):
 
         return replace(sol, t=sol.t[-1:], xi=sol.xi[-1:], omega=sol.omega[-1:],
                        Gamma=None if sol.Gamma is None else sol.Gamma[-1:], g=None if sol.g is None else sol.g[-1:])
-    return reduce(sol)
+    from ..integrators import Solution
+
+    out = reduce(sol)
+    # bad input, raised by ensemble at once (not a numerical failure of every chunk, status -1)
+    name = getattr(reduce, "__name__", type(reduce).__name__)
+    if not isinstance(out, Solution):
+        raise TypeError(f"reduce must return a Solution (e.g. dataclasses.replace(sol, ...)), but reduce={name} "
+                        f"returned {type(out).__name__}")
+    if np.ndim(out.omega) < 2 or math.prod(out.omega.shape[1:-1]) != c:
+        raise ValueError(f"reduce must keep the chunk's trajectories (batch axes {sol.omega.shape[1:-1]}), but "
+                         f"reduce={name} returned omega of shape {np.shape(out.omega)}")
+    return out
