@@ -175,6 +175,15 @@ def check_rigid_motions(g: np.ndarray, name: str, *, tol: float = 1e-8) -> None:
     check_rotations(g[..., :k, :k], f"{name}[..., :{k}, :{k}]", tol=tol)
 
 
+def tolerance_for(x: Any, tol: float = 1e-8) -> float:
+    """``tol``, or 16 ulps of ``x``'s floating type when that is coarser (float32 data cannot be unit or
+    orthogonal to 1e-8: its rounding alone is ~6e-8)."""
+    dtype = getattr(x, "dtype", None)
+    if dtype is not None and np.issubdtype(dtype, np.floating):
+        return max(tol, 16.0 * float(np.finfo(dtype).eps))
+    return tol
+
+
 def unit_vectors(x: np.ndarray, name: str, *, tol: float = 1e-8) -> np.ndarray:
     """``x / |x|`` (..., n) after checking ``| |x| - 1 | <= tol`` for every vector (the one unit check).
 
@@ -188,18 +197,18 @@ def unit_vectors(x: np.ndarray, name: str, *, tol: float = 1e-8) -> np.ndarray:
             acc += v * v
         nrm = math.sqrt(acc)
         if x.size and not abs(nrm - 1.0) <= tol:
-            raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got |{name}| = "
-                             f"{nrm:.6g}: pass {name} / |{name}|")
+            raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got |{name}| - 1 = "
+                             f"{nrm - 1.0:.3g}: pass {name} / |{name}|")
         return x / nrm
     nrm = np.sqrt(np.add.reduce(x * x, axis=-1))  # np.linalg.norm's own formula, without its ~4 µs of checks
     if nrm.ndim == 0:  # one vector: the same test and division on the Python float (~4 µs less per call)
         if x.size and not abs(float(nrm) - 1.0) <= tol:
-            raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got |{name}| = "
-                             f"{float(nrm):.6g}: pass {name} / |{name}|")
+            raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got |{name}| - 1 = "
+                             f"{float(nrm) - 1.0:.3g}: pass {name} / |{name}|")
         return x / nrm
     if x.size and not (np.abs(nrm - 1.0) <= tol).all():
-        raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got norms in "
-                         f"[{nrm.min():.6g}, {nrm.max():.6g}]: pass {name} / |{name}|")
+        raise ValueError(f"{name} must be a unit vector (|{name}| = 1 within {tol:g}); got |{name}| - 1 in "
+                         f"[{nrm.min() - 1.0:.3g}, {nrm.max() - 1.0:.3g}]: pass {name} / |{name}|")
     return x / nrm[..., None]
 
 
@@ -213,7 +222,7 @@ def check_t_span(t_span) -> tuple[float, float]:
         pair = tuple(t_span)
     except TypeError as exc:
         raise ValueError(bad) from exc
-    if any(isinstance(v, (str, bytes)) for v in pair):
+    if any(isinstance(v, (str, bytes, bool, np.bool_)) for v in pair):  # a bool would be read as 0 or 1
         raise TypeError(bad)
     try:
         t0, t1 = (float(v) for v in pair)

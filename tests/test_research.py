@@ -645,3 +645,21 @@ def test_section_helpers_and_direction_name_their_bad_arguments():
     with pytest.raises(ValueError, match="direction must be 1"):
         ls.poincare_section(free_body(J), coords3([0.3, 0.2, 1.0]), (0.0, 5.0), plane(omega=[0.0, 1.0, 0.0]),
                             direction=np.array([1, 1]))
+
+
+def test_lyapunov_failure_says_when_and_why_and_long_runs_are_refused():
+    """A failed integration gave a bare NaN; now its time and reason (status, t_stop, message; a RuntimeWarning
+    without the history). A run of 1e7 renormalisation intervals (an hour of integrate calls) is refused."""
+    top = ls.SuslovSystem(ls.Inertia.from_principal_moments([1.0, 2.0, 3.0]), constraints="none",
+                          potential=ls.LinearPotential([1.0, 0.7, 0.4]))
+    W = np.array([[3.0, -5.0, 9.0], [0.01, 0.02, 0.01]])  # the fast one runs out of steps (per interval)
+    res = ls.lyapunov_exponent(top, W, (10.0, 30.0), Gamma0=[0.0, 0.6, 0.8], return_history=True, max_steps=60,
+                               seed=0)
+    assert res.status.tolist() == [-1, 0] and np.isnan(res.exponent[0]) and np.isfinite(res.exponent[1])
+    assert 10.0 < res.t_stop[0] < 30.0 and np.isnan(res.t_stop[1])
+    assert "1 of 2 trajectories failed; the first (index 0)" in res.message and "max_steps reached" in res.message
+    with pytest.warns(RuntimeWarning, match="max_steps reached"):
+        lam = ls.lyapunov_exponent(top, W[0], (10.0, 30.0), Gamma0=[0.0, 0.6, 0.8], max_steps=60, seed=0)
+    assert np.isnan(lam)
+    with pytest.raises(ValueError, match="renormalisation intervals.*pass renormalize_every >= 1e-05"):
+        ls.lyapunov_exponent(top, W[0], (0.0, 10.0), Gamma0=[0.0, 0.6, 0.8], renormalize_every=1e-6)

@@ -630,6 +630,13 @@ def test_multiplier_form_checks_the_constraints():
 
 def test_events_bad_input():
     system = free_body()
+    # a zero normal is a constant, not a surface (an audit: a section with all-zero coefficients gave 0 crossings)
+    with pytest.raises(ValueError, match="are all 0: the event is a constant"):
+        ls.integrators.LinearEvent(omega=[0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="all 0 for some trajectory"):
+        ls.integrators.LinearEvent(omega=[[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    with pytest.raises(ValueError, match="are all 0"):
+        ls.poincare_section(system, [0.3, 1.0, 0.4], (0.0, 1.0), ls.research.plane(omega=[0.0, 0.0, 0.0]))
     with pytest.raises(TypeError, match="events"):
         ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 1.0), method="rkmk45", events=[1.0])
     ev = coordinate_plane("omega", 1, dim=3)
@@ -690,3 +697,46 @@ def test_linear_event_called_directly_reads_so3_matrices():
     assert np.allclose(ev(0.0, batch, None, None), batch[:, 1] - 0.05)
     ev4 = ls.integrators.LinearEvent(omega=np.arange(6.0))
     assert ev4(0.0, ls.so(4).hat(np.ones(6)), None, None) == pytest.approx(15.0)
+
+
+def test_float32_initial_data_is_accepted_to_its_own_rounding():
+    """float32 Gamma0 and g0 were refused (their rounding, ~6e-8, is above the 1e-8 tolerance) with a message
+    reading 'got |Gamma0| = 1'; they are accepted to 16 float32 ulps and moved onto the sphere and the group."""
+    system, Omega0, _ = kt_body()
+    R = np.linalg.qr(np.random.default_rng(1).normal(size=(4, 4)))[0]
+    R[:, 0] *= np.sign(np.linalg.det(R))
+    G32, g32 = np.float32([0.0, 0.0, 0.6, 0.8]), R.astype(np.float32)
+    sol = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=G32, g0=g32, reconstruct=True, method="rkmk45")
+    assert sol.success and np.max(np.abs(np.linalg.norm(sol.Gamma, axis=-1) - 1.0)) < 1e-14
+    assert np.max(np.abs(np.swapaxes(sol.g, -1, -2) @ sol.g - np.eye(4))) < 1e-14
+    ens = ls.ensemble(system, np.stack([Omega0, 0.5 * Omega0]), (0.0, 1.0), Gamma0=G32, g0=g32, reconstruct=True,
+                      method="rkmk45", chunk_size=1)
+    assert np.array_equal(ens.g[-1, 0], sol.g[-1])
+    with pytest.raises(ValueError, match=r"got \|Gamma0\| - 1 = 0.00802"):
+        ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=[0.0, 0.0, 0.6, 0.81], method="rkmk45")
+    with pytest.raises(ValueError, match="within 1e-08"):  # float64 data keeps the 1e-8 tolerance
+        ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=G32.astype(float), method="rkmk45")
+
+
+def test_options_are_checked_whether_or_not_the_method_reads_them():
+    """From a fuzz audit: values accepted silently (or read as something else) are refused, naming them."""
+    system = free_body()
+    w = [0.3, 1.0, 0.4]
+    with pytest.raises(ValueError, match="rtol"):
+        ls.integrate(system, w, (0.0, 1.0), method="rkmk4", h=0.1, rtol=-1.0)
+    with pytest.raises(ValueError, match="atol"):
+        ls.integrate(system, w, (0.0, 1.0), method="rkmk4", h=0.1, atol=np.nan)
+    with pytest.raises((ValueError, TypeError), match="first_step"):
+        ls.integrate(system, w, (0.0, 1.0), method="rkmk4", h=0.1, first_step=-1.0)
+    with pytest.raises(TypeError, match="progress must be True or False"):
+        ls.integrate(system, w, (0.0, 1.0), method="rkmk45", progress="yes")
+    with pytest.raises(TypeError, match="t_span"):
+        ls.integrate(system, w, (True, 2.0), method="rkmk45")
+    with pytest.raises(ValueError, match="form='multiplier' chooses the model"):
+        ls.integrate(system.model(), w, (0.0, 1.0), method="rkmk45", form="multiplier")
+    ev = coordinate_plane("omega", 1, dim=3)
+    ev.direction = True
+    with pytest.raises(ValueError, match="direction must be -1, 0 or \\+1, got True"):
+        ls.integrate(system, w, (0.0, 1.0), method="rkmk45", events=ev)
+    with pytest.raises(TypeError, match="not a boolean"):
+        ls.integrate(system, w, (0.0, 1.0), method="rkmk45", events=lambda t, O, G, g: t > 0.5)

@@ -404,11 +404,12 @@ def _given_initial_data(system, is_model, Omega0, Gamma0, g0, options) -> tuple[
         raise TypeError(f"form must be a string, got {type(form).__name__}")
     _, x0, _, _, batch_shape = _initial_data(system, is_model, Omega0, Gamma0, g0, bool(reconstruct), form)
     init = {"Omega0": x0}
-    # already checked by _initial_data: only the conversion (no copy of a float array)
-    if Gamma0 is not None:
-        init["Gamma0"] = as_float_array(Gamma0, "Gamma0")
-    if g0 is not None:
-        init["g0"] = as_float_array(g0, "g0")
+    # already checked by _initial_data: only the conversion (no copy of a float array); a float32 array stays
+    # one, so that each chunk's integrate grants it float32's tolerance, as the whole batch's call did
+    for key, v in (("Gamma0", Gamma0), ("g0", g0)):
+        if v is not None:
+            a = np.asarray(v)
+            init[key] = a if np.issubdtype(a.dtype, np.floating) else as_float_array(v, key)
     return init, tuple(batch_shape)
 
 

@@ -119,6 +119,8 @@ def event_flags(event) -> tuple[int, int]:
                         f"{type(event).__name__}")
     terminal = terminal_count(getattr(event, "terminal", False))
     direction = getattr(event, "direction", 0)
+    if isinstance(direction, (bool, np.bool_)):  # True would be read as +1
+        raise ValueError(f"event.direction must be -1, 0 or +1, got {direction!r}")
     try:
         direction = float(direction)
     except (TypeError, ValueError) as exc:
@@ -161,6 +163,13 @@ class LinearEvent:
         self.Gamma = None if Gamma is None else _real(Gamma, "Gamma")
         self.g = None if g is None else _real(g, "g")
         self.offset = _real(offset, "offset")
+        # a zero normal makes the constant -offset: no surface to cross (never one, or, at offset 0, everywhere)
+        norm2 = sum(np.sum(c * c, axis=tuple(range(c.ndim - core, c.ndim)))
+                    for c, core in ((self.omega, 1), (self.Gamma, 1), (self.g, 2)) if c is not None)
+        if np.any(norm2 == 0.0):
+            raise ValueError("LinearEvent: its coefficients (omega=, Gamma=, g=) are all 0"
+                             + (" for some trajectory" if np.ndim(norm2) else "")
+                             + ": the event is a constant, not a surface; pass a nonzero normal")
         count = terminal_count(terminal, "terminal")
         self.terminal = bool(count) if isinstance(terminal, (bool, np.bool_)) else count
         self.direction = direction

@@ -21,6 +21,7 @@ from .._validation import (
     check_rotations,
     check_t_eval,
     check_t_span,
+    tolerance_for,
     unit_vectors,
 )
 from ..algebra.elements import body_vector, omega_coordinates
@@ -156,8 +157,10 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         for name, value in (("method", method), ("chart", chart), ("backend", backend), ("form", form)):
             if not isinstance(value, str):
                 raise TypeError(f"{name} must be a string, got {type(value).__name__}")
-    if not (type(reconstruct) is bool and type(dense_output) is bool and type(reproject) is bool):
-        for name, value in (("reconstruct", reconstruct), ("dense_output", dense_output), ("reproject", reproject)):
+    if not (type(reconstruct) is bool and type(dense_output) is bool and type(reproject) is bool
+            and type(progress) is bool):
+        for name, value in (("reconstruct", reconstruct), ("dense_output", dense_output), ("reproject", reproject),
+                            ("progress", progress)):
             if not isinstance(value, (bool, np.bool_)):
                 raise TypeError(f"{name} must be True or False, got {type(value).__name__}")
     if isinstance(h, (bool, np.bool_)):
@@ -172,12 +175,18 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
     meth = METHODS[method]
     t0, t1 = check_t_span(t_span)
+    # checked whether or not the method reads them: a bad value is a mistake either way
+    rtol = check_positive(rtol, "rtol")
+    atol = check_positive(atol, "atol")
+    if first_step is not None:
+        first_step = check_positive(first_step, "first_step")
+    if is_model and form != "auto":
+        raise ValueError(f"form={form!r} chooses the model of a SuslovSystem; system is already a model "
+                         f"({type(system).__name__}): pass the system, or leave form out")
     if meth.adaptive:
-        rtol = check_positive(rtol, "rtol")
-        atol = check_positive(atol, "atol")
         step0 = 0.0
         if first_step is not None:
-            step0 = check_positive(first_step, "first_step")
+            step0 = first_step
         elif h is not None:
             step0 = check_positive(h, "h")
     else:
@@ -230,7 +239,8 @@ def _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form):
     shapes = [x0.shape[:-1]]
     G0_ = None
     if model.has_gamma:
-        G0_ = unit_vectors(as_float_array(Gamma0, "Gamma0", ndim_min=1, tail=(m,)), "Gamma0")
+        G0_ = unit_vectors(as_float_array(Gamma0, "Gamma0", ndim_min=1, tail=(m,)), "Gamma0",
+                           tol=tolerance_for(Gamma0))
         shapes.append(G0_.shape[:-1])
     g_init = None
     if reconstruct:
@@ -240,14 +250,15 @@ def _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form):
             g_init = np.eye(m)
         else:
             g_init = as_float_array(g0, "g0", ndim_min=2, tail=(m, m))
-            # accepted within 1e-8 of the group, then moved onto it (as Gamma0 is normalised): the structure is
-            # exact from t0 on (to rounding), and the solution owns its copy (a later change of the caller's
-            # array would change what sol.at replays)
+            # accepted within 1e-8 of the group (float32: 16 ulps), then moved onto it (as Gamma0 is normalised):
+            # the structure is exact from t0 on (to rounding), and the solution owns its copy (a later change of
+            # the caller's array would change what sol.at replays)
+            tol = tolerance_for(g0)  # float32 data is orthogonal only to its own rounding
             if alg.name.startswith("so("):
-                check_rotations(g_init, "g0")
+                check_rotations(g_init, "g0", tol=tol)
                 g_init = orthonormalize(g_init)
             elif alg.name.startswith("se("):
-                check_rigid_motions(g_init, "g0")
+                check_rigid_motions(g_init, "g0", tol=tol)
                 g_init = g_init.copy()
                 g_init[..., :-1, :-1] = orthonormalize(g_init[..., :-1, :-1])
             else:

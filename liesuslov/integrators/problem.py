@@ -56,8 +56,11 @@ def run_message(status: np.ndarray, t_stop: np.ndarray, failure: np.ndarray | No
         what, _, hint = what.partition(" (")
         return f"{head}{what} at t = {t_stop[b]:.17g}" + (f" ({hint}" if hint else "")
     stopped = int(np.sum(status == STATUS_TERMINAL))
-    return (f"A terminal event stopped {stopped} of {status.size} trajectories; the others reached the end."
-            if status.size > 1 else f"A terminal event stopped the trajectory at t = {t_stop[0]:.17g}.")
+    if status.size == 1:
+        return f"A terminal event stopped the trajectory at t = {t_stop[0]:.17g}."
+    if stopped == status.size:
+        return f"A terminal event stopped all {stopped} trajectories."
+    return f"A terminal event stopped {stopped} of {status.size} trajectories; the others reached the end."
 
 
 #: Products ``g <- g phi(Theta)`` add ~1e-16 per step to |g^T g - I|; with ``reproject`` a Newton–Schulz step
@@ -201,9 +204,11 @@ class Problem:
                        f"{'a float' if shape == () else f'of shape {shape}'}, Omega of shape {np.shape(lead(Omega))}"
                        f"; in an ensemble, on one chunk of the flattened batch)") from exc
         raw = np.asarray(value)
-        if value is None or raw.dtype.kind not in "biuf":  # None would be NaN, a complex value its real part
-            raise TypeError(f"events[{e}] must return real numbers, one per trajectory; got "
-                            f"{type(value).__name__}" + (f" of {raw.dtype}" if value is not None else ""))
+        if value is None or raw.dtype.kind not in "iuf":  # None would be NaN, a complex value its real part
+            # (booleans: a step function, whose "root" is wherever the bisection lands in the step)
+            raise TypeError(f"events[{e}] must return real numbers, one per trajectory (a function whose sign "
+                            f"changes at the surface, not a boolean); got {type(value).__name__}"
+                            + (f" of {raw.dtype}" if value is not None else ""))
         value = raw.astype(float, copy=False)
         try:
             value = np.broadcast_to(value, shape)

@@ -19,13 +19,15 @@ the change of the running estimate over the second half of the run.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from .._rows import rows_at
 from ..integrators import integrate
+from ..integrators.problem import FAILURES
 from . import _runner as R
 
 __all__ = ["lyapunov_exponent", "LyapunovResult"]
@@ -50,6 +52,10 @@ class LyapunovResult:
         leaves at this length.
     status : ndarray of int, shape (...)
         0, or -1 when an integration failed (the exponent is then NaN).
+    t_stop : ndarray, shape (...)
+        The time of each trajectory's failure (NaN where it did not fail).
+    message : str
+        What failed first, and when (empty when nothing did).
     """
 
     exponent: np.ndarray
@@ -58,8 +64,13 @@ class LyapunovResult:
     spread: np.ndarray
     log_t_over_t: float
     status: np.ndarray
+    t_stop: np.ndarray = field(default_factory=lambda: np.full((), np.nan))
+    message: str = ""
 
 
+#: Most renormalisation intervals of one run: each is an integrate call on the batch (~0.5 ms for one
+#: trajectory), so 1e6 of them are minutes; a longer run asks for a longer ``renormalize_every``.
+MAX_INTERVALS = 1_000_000
 #: Smallest delta, relative to the state's size: the companion's distance must be far above rounding.
 DELTA_FLOOR = 1e-12
 #: Smallest ``delta * T`` relative to the state's size: rounding's share ``eps |s| / (delta T)`` of the estimate
@@ -135,13 +146,20 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
         Return a :class:`LyapunovResult` (the running estimate and its convergence) instead of the array.
     **options
         ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``. Each interval
-        is one ``integrate`` call on the batch of ``2B`` trajectories (reference and companion).
+        is one ``integrate`` call on the batch of ``2B`` trajectories (reference and companion): ``max_steps``
+        bounds each interval's steps, and a run has at most :data:`MAX_INTERVALS` intervals.
 
     Returns
     -------
     ndarray, shape (...)
-        ``lambda`` in natural log per unit time (NaN where an integration failed); or a
-        :class:`LyapunovResult` with ``return_history=True``.
+        ``lambda`` in natural log per unit time (NaN where an integration failed, with a RuntimeWarning
+        saying what failed and when); or a :class:`LyapunovResult` with ``return_history=True`` (its
+        ``status``, ``t_stop`` and ``message`` say it).
+
+    Raises
+    ------
+    ValueError
+        Bad arguments, naming them; more than :data:`MAX_INTERVALS` renormalisation intervals.
     """
     t0, t1 = R.check_span(t_span)
     if not isinstance(return_history, (bool, np.bool_)):
@@ -170,6 +188,11 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
         if tau > span:
             raise ValueError(f"renormalize_every = {tau:g} is longer than t_span ({span:g})")
         K = max(1, int(round(span / tau)))
+    if K > MAX_INTERVALS:
+        raise ValueError(f"t_span / renormalize_every = {K:.3g} renormalisation intervals, each an integrate call "
+                         f"(~0.5 ms): more than {MAX_INTERVALS:.0e}; pass renormalize_every >= "
+                         f"{span / MAX_INTERVALS:.3g} (the exponent does not depend on it while the separation "
+                         "stays linear) or a shorter t_span")
     seed_key = _seed_key(seed)
     B = b.size
     Dbasis = system.constraints.basis
@@ -187,6 +210,8 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
     # the running estimate at every renormalisation only when asked for (K can be ~t / 5: 2e8 rows for t = 1e9)
     hist = np.empty((K if return_history else 1, B))
     status = np.zeros(B, dtype=int)
+    t_stop = np.full(B, np.nan)
+    message = ""
     t_prev = 0.0
     for j in range(K):
         t_next = span * (j + 1) / K  # the interval's end, from t0 (an array of K would be 1.6 GB at t = 1e9)
@@ -208,6 +233,21 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
             d = np.concatenate([d, G_q - G], axis=-1)
         dist = np.linalg.norm(d, axis=-1)
         bad |= ~np.isfinite(dist) | (dist == 0.0)
+        new = bad & (status == 0)
+        if np.any(new):
+            # the integration's own stop time where it failed, else the interval's end (a vanished separation)
+            stops = np.asarray(sol.stats.get("t_stop", np.full(2 * B, np.nan)), dtype=float).reshape(-1)
+            stops = stops if stops.size == 2 * B else np.full(2 * B, np.nan)
+            when = np.fmin(stops[:B], stops[B:])
+            t_stop[new] = t0 + np.where(np.isfinite(when[new]), when[new], t_next)
+            if not message:
+                i = int(np.flatnonzero(new)[0])
+                codes = np.asarray(sol.stats.get("failure", np.zeros(2 * B)), dtype=int).reshape(-1)
+                code = next((int(c) for c in codes[[i, B + i]] if c), 0) if codes.size == 2 * B else 0
+                why = FAILURES.get(code, "the separation became 0 or non-finite" if not code else "failure")
+                message = (f"{int(np.count_nonzero(new))} of {B} trajectories failed; the first (index {i}) at "
+                           f"t = {t_stop[i]:.6g}: {why} (integrating it or its companion); their exponents are "
+                           "NaN")
         status[bad] = -1
         logsum = logsum + np.log(np.where(bad, 1.0, dist) / delta)
         logsum[status < 0] = np.nan
@@ -227,10 +267,12 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
         t_prev = t_next
     lam = hist[-1].reshape(b.shape)
     if not return_history:
+        if message:
+            warnings.warn(f"lyapunov_exponent: {message}", RuntimeWarning, stacklevel=2)
         return lam
     half = hist[K // 2:]
     spread = (np.max(half, axis=0) - np.min(half, axis=0)).reshape(b.shape)
     times = t0 + span * np.arange(1, K + 1) / K
     return LyapunovResult(exponent=lam, times=times, history=hist.reshape((K,) + b.shape), spread=spread,
                           log_t_over_t=float(np.log(span) / span) if span > 1 else float("nan"),
-                          status=status.reshape(b.shape))
+                          status=status.reshape(b.shape), t_stop=t_stop.reshape(b.shape), message=message)

@@ -466,10 +466,12 @@ def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, st
     B = b.size
     m = system.n
     xdot, Gdot = system.rhs(b.omega, b.Gamma)
-    off = np.sum(xdot * b.omega, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot * b.Gamma, axis=-1))
-    plane = R.make_plane(omega=xdot, Gamma=Gdot, offset=off, direction=1)
     speed = np.sqrt(np.sum(xdot ** 2, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot ** 2, axis=-1)))
     still = speed <= R.STILL * np.maximum(scale, 1.0)
+    off = np.sum(xdot * b.omega, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot * b.Gamma, axis=-1))
+    # an equilibrium's plane has no normal (a zero velocity); it is never integrated: any normal stands in
+    normal = np.where(still[:, None] & (np.arange(xdot.shape[-1]) == 0), 1.0, xdot)
+    plane = R.make_plane(omega=normal, Gamma=Gdot, offset=off, direction=1)
     if raise_still and np.any(still):
         raise ValueError(f"Omega0: the initial state of trajectory {int(np.flatnonzero(still)[0])} (flat index) is an "
                          f"equilibrium of the reduced flow (speed <= {R.STILL:g} |s0|): it has no period to resolve; "
