@@ -8,13 +8,14 @@ natively by the integrator.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .._rows import rows_at
-from .._validation import as_float_array, check_positive, check_t_span
+from .._validation import check_positive, check_t_span
 from ..integrators import integrate
 from ..integrators.events import EventRecord, LinearEvent
 from ..integrators.problem import run_message
@@ -82,47 +83,12 @@ def prepare(system, Omega0, Gamma0=None, g0=None) -> Batch:
 
     if not isinstance(system, SuslovSystem):
         raise TypeError(f"system must be a SuslovSystem (e.g. ls.SuslovSystem(J, ...)), got {type(system).__name__}")
-    x = system.coordinates(Omega0, "Omega0")
-    D = system.constraints
-    inside = D.contains(x, 1e-9)
-    if not np.all(inside):
-        dist = float(np.max(np.linalg.norm(x - D.project(x), axis=-1)))
-        raise ValueError(f"Omega0 is not in the constraint subspace D (distance {dist:.3g}); project it first, "
-                         "e.g. system.constraints.project(omega)")
-    shapes = [x.shape[:-1]]
-    G = None
-    if Gamma0 is None and system.needs_gamma:
-        raise ValueError(f"Gamma0 is required: the potential (or gyroscopic term) depends on Gamma; pass a unit "
-                         f"vector of shape (..., {system.n})")
-    if Gamma0 is not None:
-        if not system.is_so:
-            raise ValueError(f"Gamma0 must be None on {system.algebra.name}: Gamma exists only for a body in SO(n)")
-        G = as_float_array(Gamma0, "Gamma0", ndim_min=1, tail=(system.n,))
-        norms = np.linalg.norm(G, axis=-1)
-        dev = float(np.max(np.abs(norms - 1.0))) if norms.size else 0.0
-        if dev > 1e-8:
-            raise ValueError(f"Gamma0 must be a unit vector (|Gamma0| = 1 to 1e-8); the largest deviation is "
-                             f"{dev:.3g}: pass Gamma0 / |Gamma0|")
-        G = G / norms[..., None]
-        shapes.append(G.shape[:-1])
-    g = None
-    if g0 is not None:
-        m = system.n
-        if m is None:
-            raise ValueError(f"g0 needs a matrix representation of {system.algebra.name}")
-        g = as_float_array(g0, "g0", ndim_min=2, tail=(m, m))
-        if system.is_so:
-            err = float(np.max(np.abs(np.swapaxes(g, -1, -2) @ g - np.eye(m)), initial=0.0))
-            if err > 1e-8 or np.any(np.linalg.det(g) < 0):
-                raise ValueError(f"g0 must be in SO(n): g^T g = I (max defect {err:.3g}) and det g = +1")
-        shapes.append(g.shape[:-2])
-    try:
-        shape = tuple(np.broadcast_shapes(*shapes))
-    except ValueError as exc:
-        raise ValueError(f"the batch axes of Omega0, Gamma0 and g0 do not broadcast: {shapes}") from exc
-    B = int(np.prod(shape, dtype=int))
-    if B == 0:
-        raise ValueError(f"the batch of initial data is empty (batch shape {shape}); pass at least one Omega0")
+    # integrate's own reading and checks (one source): coordinates in D, Gamma0 unit (normalised), g0 on the group
+    from ..integrators.integrate import _initial_data
+
+    _, x, G, g, shape = _initial_data(system, False, Omega0, Gamma0, g0, g0 is not None, "auto")
+    shape = tuple(shape)
+    B = math.prod(shape)
     x = np.broadcast_to(x, shape + x.shape[-1:]).reshape(B, -1).copy()
     if G is not None:
         G = np.broadcast_to(G, shape + G.shape[-1:]).reshape(B, -1).copy()
