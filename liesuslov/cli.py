@@ -216,6 +216,7 @@ def _cmd_run(args) -> int:
     scene = _load(args.scene, t_end=args.t_end, progress=args.progress or None, backend=args.backend,
                   out_dir=args.out, figures=False if args.no_figures else None)
     out = Path(scene.out_dir)
+    _probe_out_dir(out)
     result = _integrate_and_report(scene, tol=None, failed_note=" (nothing written)")
     if result is None:
         return 1
@@ -223,6 +224,22 @@ def _cmd_run(args) -> int:
     written = _write_outputs(scene, sol, lines, out)
     print(f"wrote {out}{os.sep}: {', '.join(written)}")
     return 0
+
+
+def _probe_out_dir(out: Path) -> None:
+    """Refuse, before integrating, an output folder that cannot be made (a file on its path, /proc, no
+    permission): the run's minutes would otherwise end in an OSError. Made and removed again if it is new."""
+    if out.exists():
+        if not out.is_dir():
+            raise _UserError(f"the output folder {out} exists and is not a folder; pass --out DIR")
+        return
+    try:
+        out.mkdir(parents=True)
+    except OSError as exc:
+        raise _UserError(f"the output folder {out} cannot be created ({exc.strerror or exc}); pass --out DIR "
+                         "(or [output].dir) with a folder you can write") from exc
+    # only the folder itself: parents it made stay (harmless, and removing them could race with another run)
+    out.rmdir()
 
 
 def _load(path: str | None, **overrides: Any):

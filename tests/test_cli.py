@@ -264,3 +264,17 @@ def test_bench_refuses_an_unknown_backend(capsys):
     """--backend gpu was ignored (exit 0, the summary said 'numpy')."""
     assert cli.main(["bench", "--quick", "--backend", "gpu"]) == 2
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_run_refuses_an_output_folder_it_cannot_make_before_integrating(tmp_path, capsys, monkeypatch):
+    """An impossible [output].dir was found only after the whole integration (an OSError at the end)."""
+    called = []
+    monkeypatch.setattr(cli, "_integrate_and_report", lambda *a, **k: called.append(1))
+    (tmp_path / "afile").write_text("x")
+    assert cli.main(["run", "--out", str(tmp_path / "afile" / "out"), "--no-figures"]) == 2
+    assert "cannot be created" in capsys.readouterr().err and not called
+    assert cli.main(["run", "--out", str(tmp_path / "afile"), "--no-figures"]) == 2
+    assert "exists and is not a folder" in capsys.readouterr().err and not called
+    fresh = tmp_path / "new" / "out"
+    assert cli.main(["run", "--out", str(fresh), "--no-figures"]) == 1  # (the stub reports a failed run)
+    assert called and not fresh.exists()  # probed, then left as it was

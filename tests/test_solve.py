@@ -630,6 +630,15 @@ def test_multiplier_form_checks_the_constraints():
 
 def test_events_bad_input():
     system = free_body()
+    kt, Omega0, Gamma0 = kt_body()
+    two = np.stack([Omega0, Omega0])
+    for ev, msg in ((LinearEvent(Gamma=[1.0, 0.0, 0.0]), r"events\[0\]: LinearEvent Gamma coefficients must have shape "
+                     r"\(\.\.\., 4\)"),
+                    (LinearEvent(g=np.eye(3)), r"LinearEvent g coefficients must have shape \(\.\.\., 4, 4\)"),
+                    (LinearEvent(Gamma=[1.0, 0.0, 0.0, 0.0], offset=[0.1, 0.2, 0.3]),
+                     r"do not broadcast to the batch shape \(2,\)")):
+        with pytest.raises(ValueError, match=msg):  # numpy's broadcast error before (an audit)
+            ls.integrate(kt, two, (0.0, 1.0), Gamma0=Gamma0, reconstruct=True, method="rkmk45", events=ev)
     # a zero normal is a constant, not a surface (an audit: a section with all-zero coefficients gave 0 crossings)
     with pytest.raises(ValueError, match="are all 0: the event is a constant"):
         ls.integrators.LinearEvent(omega=[0.0, 0.0, 0.0])

@@ -325,10 +325,23 @@ def _add_events(P: Problem, events, batch_shape) -> None:
     P.event_direction = np.array([f[1] for f in flags], dtype=np.int64)
     W = np.asarray(P.model.omega_coords(np.eye(P.k)), dtype=float)  # (k, d): omega = xi @ W
     lin = []
-    for e in evs:
+    for i, e in enumerate(evs):
         if not isinstance(e, LinearEvent):
             lin.append(None)
             continue
+        n = P.model.n
+        for name, c, tail in (("Gamma", e.Gamma, (n,)), ("g", e.g, (P.m, P.m))):
+            if c is not None and n is not None and (c.ndim < len(tail) or c.shape[c.ndim - len(tail):] != tail):
+                raise ValueError(f"events[{i}]: LinearEvent {name} coefficients must have shape (..., "
+                                 f"{', '.join(map(str, tail))}), got {c.shape}")
+        heads = [c.shape[:c.ndim - core] for c, core in ((e.omega, 1), (e.Gamma, 1), (e.g, 2)) if c is not None]
+        try:  # (a coefficient with more batch axes than the batch broadcasts, but not *to* the batch)
+            if np.broadcast_shapes(*heads, np.shape(e.offset), batch_shape) != tuple(batch_shape):
+                raise ValueError
+        except ValueError:
+            raise ValueError(f"events[{i}]: the batch axes of the LinearEvent's coefficients and offset "
+                             f"({', '.join(map(str, heads + [np.shape(e.offset)]))}) do not broadcast to the batch "
+                             f"shape {tuple(batch_shape)}: one plane for all, or one per trajectory") from None
         coef = np.zeros(batch_shape + (P.k + P.q,))
         if e.omega is not None:
             if e.omega.shape[-1] != W.shape[1]:
