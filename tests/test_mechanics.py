@@ -794,3 +794,16 @@ def test_user_callables_cannot_write_into_the_integrated_state():
 
     with pytest.raises(ValueError, match=r"events\[0\] raised ValueError: assignment destination is read-only"):
         ls.integrate(system, [0.0, 0.6, -0.4], (0.0, 5.0), Gamma0=[0.0, 0.6, 0.8], method="rkmk45", events=meddling)
+
+
+def test_mismatched_shapes_are_named():
+    """numpy's broadcast errors named neither array (an audit): the potentials and the system say which."""
+    with pytest.raises(ValueError, match=r"Gamma must have shape \(\.\.\., 3\)"):
+        ls.LinearPotential([1.0, 2.0, 3.0]).grad(np.ones(4))
+    with pytest.raises(ValueError, match=r"Gamma must have shape \(\.\.\., 3\)"):
+        ls.QuadraticPotential([1.0, 2.0, 3.0]).V(np.ones((2, 4)))
+    system = SuslovSystem(Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0, 4.0])),
+                          potential=ls.QuadraticPotential([4.0, 3.0, 2.0, 1.0]))
+    with pytest.raises(ValueError, match=r"batch axes of Omega \(2,\) and Gamma \(3,\) do not broadcast"):
+        system.energy(np.zeros((2, 6)), np.full((3, 4), 0.5))
+    assert system.energy(np.zeros((2, 6)), np.array([0.0, 0.0, 0.6, 0.8])).shape == (2,)

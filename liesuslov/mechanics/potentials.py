@@ -25,6 +25,14 @@ __all__ = ["Potential", "ZeroPotential", "LinearPotential", "QuadraticPotential"
            "GradientCheck", "check_gradient"]
 
 
+def _vertical(Gamma, n: int) -> np.ndarray:
+    """``Gamma`` as floats (..., n), or a ValueError naming it (numpy's broadcast error named nothing)."""
+    G = np.asarray(Gamma, dtype=float)
+    if G.ndim == 0 or G.shape[-1] != n:
+        raise ValueError(f"Gamma must have shape (..., {n}) for this potential on S^{n - 1}, got {G.shape}")
+    return G
+
+
 def real_values(value, label: str) -> np.ndarray:
     """``value`` as a float array; a complex (or object) result of a user callable is a TypeError.
 
@@ -141,10 +149,10 @@ class LinearPotential(Potential):
         return not np.any(self.B)
 
     def V(self, Gamma) -> np.ndarray:
-        return rows_at(np.asarray(Gamma, dtype=float), self.B)
+        return rows_at(_vertical(Gamma, self.B.shape[-1]), self.B)
 
     def grad(self, Gamma) -> np.ndarray:
-        return np.zeros(np.shape(Gamma)) + self.B
+        return np.zeros(_vertical(Gamma, self.B.shape[-1]).shape) + self.B
 
 
 class QuadraticPotential(Potential):
@@ -189,13 +197,13 @@ class QuadraticPotential(Potential):
         return not np.any(self.matrix)
 
     def V(self, Gamma) -> np.ndarray:
-        G = np.asarray(Gamma, dtype=float)
+        G = _vertical(Gamma, self.matrix.shape[-1])
         if self.diagonal is not None:
             return 0.5 * rows_at(G * G, self.diagonal)
         return 0.5 * np.sum(rows_at(G, self.matrix) * G, axis=-1)
 
     def grad(self, Gamma) -> np.ndarray:
-        G = np.asarray(Gamma, dtype=float)
+        G = _vertical(Gamma, self.matrix.shape[-1])
         if self.diagonal is not None:
             return G * self.diagonal
         return rows_at(G, self.matrix)

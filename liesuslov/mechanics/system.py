@@ -208,7 +208,7 @@ class SuslovSystem:
         """
         return omega_coordinates(self.algebra, Omega, name)
 
-    def _gamma(self, Gamma, required: bool, name: str = "Gamma") -> np.ndarray | None:
+    def _gamma(self, Gamma, required: bool, name: str = "Gamma", omega: np.ndarray | None = None) -> np.ndarray | None:
         if Gamma is None:
             if required:
                 why = "V != 0" if self.has_potential else "the gyroscopic term needs it"
@@ -217,7 +217,14 @@ class SuslovSystem:
             return None
         if not self.is_so:
             raise ValueError(f"{name} must be None on {self.algebra.name} (no potential there)")
-        return as_float_array(Gamma, name, ndim_min=1, tail=(self.n,))
+        G = as_float_array(Gamma, name, ndim_min=1, tail=(self.n,))
+        if omega is not None and omega.shape[:-1] != G.shape[:-1]:
+            try:  # (numpy's own error, later, named neither array)
+                np.broadcast_shapes(omega.shape[:-1], G.shape[:-1])
+            except ValueError:
+                raise ValueError(f"the batch axes of Omega {omega.shape[:-1]} and {name} {G.shape[:-1]} do not "
+                                 "broadcast") from None
+        return G
 
     def _in_D(self, x: np.ndarray, name: str) -> np.ndarray:
         D = self.constraints
@@ -265,7 +272,7 @@ class SuslovSystem:
         """
         x = self.coordinates(Omega)
         E = self.inertia.kinetic_energy(x)
-        G = self._gamma(Gamma, required=self.has_potential)
+        G = self._gamma(Gamma, omega=x, required=self.has_potential)
         if self.has_potential:
             E = E + self.potential.V(G)
         return E
@@ -278,7 +285,7 @@ class SuslovSystem:
         ``A dOmega/dt = 0``.
         """
         x = self.coordinates(Omega)
-        G = self._gamma(Gamma, required=self.needs_gamma)
+        G = self._gamma(Gamma, omega=x, required=self.needs_gamma)
         return self._multipliers_of(self.torque(x, G))
 
     def rhs(self, Omega, Gamma=None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -287,7 +294,7 @@ class SuslovSystem:
         ``dGamma/dt = -Omega Gamma`` is None when no ``Gamma`` is given (allowed iff V = 0 and eps = 0).
         """
         x = self.coordinates(Omega)
-        G = self._gamma(Gamma, required=self.needs_gamma)
+        G = self._gamma(Gamma, omega=x, required=self.needs_gamma)
         f = self.torque(x, G)
         A, Kinv, _ = self.reaction
         xdot = rows_at(f + rows_at(self._multipliers_of(f), A), Kinv)
@@ -312,7 +319,7 @@ class SuslovSystem:
         """
         x = self.coordinates(Omega)
         self._in_D(x, "Omega")
-        G = self._gamma(Gamma, required=self.gyroscopic != 0.0)
+        G = self._gamma(Gamma, omega=x, required=self.gyroscopic != 0.0)
         B = self.constraints.basis
         K = self.inertia.matrix
         L = np.linalg.solve(B @ K @ B.T, B)  # (k, d)
