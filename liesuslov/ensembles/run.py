@@ -14,10 +14,8 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_float_array, check_t_eval, check_t_span
-from ..integrators.integrate import _initial_data
+from ..integrators.integrate import _initial_data, system_is_model
 from ..integrators.problem import run_message
-from ..mechanics.protocol import ModelProtocol
-from ..mechanics.system import SuslovSystem
 from .checks import _nonneg_int, _positive_int
 from .constants import (
     _ARRAYS,
@@ -121,11 +119,7 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
 
     t0, t1 = check_t_span(t_span)
     t_eval = np.array([t0, t1]) if t_eval is None else check_t_eval(t_eval, t0, t1)
-    # integrate's own test (_initial_data needs to know which of the two it is given)
-    is_model = not isinstance(system, SuslovSystem) and isinstance(system, ModelProtocol)
-    if not (isinstance(system, SuslovSystem) or is_model):
-        raise TypeError(f"system must be a SuslovSystem (or a model such as system.model()), "
-                        f"got {type(system).__name__}")
+    is_model = system_is_model(system)  # integrate's test (and its TypeError)
     allowed = set(inspect.signature(integrate).parameters) - {"system", "Omega0", "t_span", "Gamma0", "g0", "t_eval",
                                                               "progress"}
     unknown = sorted(set(options) - allowed)
@@ -396,13 +390,8 @@ def _given_initial_data(system, is_model, Omega0, Gamma0, g0, options) -> tuple[
     the float arrays the user gave (checked here): integrate normalises Gamma0 per trajectory on each chunk, as it
     would on the whole batch, so the numbers are the same bit for bit.
     """
-    reconstruct, form = options.get("reconstruct", False), options.get("form", "auto")
-    # integrate tests these types before it reads the initial data; so does the ensemble, with its messages
-    if not isinstance(reconstruct, (bool, np.bool_)):
-        raise TypeError(f"reconstruct must be True or False, got {type(reconstruct).__name__}")
-    if not isinstance(form, str):
-        raise TypeError(f"form must be a string, got {type(form).__name__}")
-    _, x0, _, _, batch_shape = _initial_data(system, is_model, Omega0, Gamma0, g0, bool(reconstruct), form)
+    _, x0, _, _, batch_shape = _initial_data(system, is_model, Omega0, Gamma0, g0, options.get("reconstruct", False),
+                                             options.get("form", "auto"))
     init = {"Omega0": x0}
     # already checked by _initial_data: only the conversion (no copy of a float array); a float32 array stays
     # one, so that each chunk's integrate grants it float32's tolerance, as the whole batch's call did

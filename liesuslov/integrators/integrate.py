@@ -147,20 +147,15 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         None, ``status (...)`` (0 reached t1, 1 terminal event, -1 failed; NaN after a trajectory stopped),
         ``events``, ``stats``.
     """
-    # the SuslovSystem test first: a runtime Protocol check walks the class's attributes (~20 µs a call)
-    is_model = not isinstance(system, SuslovSystem) and isinstance(system, ModelProtocol)
-    if not (isinstance(system, SuslovSystem) or is_model):
-        raise TypeError(f"system must be a SuslovSystem (or a model such as system.model()), "
-                        f"got {type(system).__name__}")
-    # one test of the usual types first; the loops name the argument (~2 µs a call saved)
-    if not (type(method) is str and type(chart) is str and type(backend) is str and type(form) is str):
-        for name, value in (("method", method), ("chart", chart), ("backend", backend), ("form", form)):
+    is_model = system_is_model(system)
+    # one test of the usual types first; the loops name the argument (~2 µs a call saved); reconstruct and form
+    # are _initial_data's (which ensembles and the research tools call too)
+    if not (type(method) is str and type(chart) is str and type(backend) is str):
+        for name, value in (("method", method), ("chart", chart), ("backend", backend)):
             if not isinstance(value, str):
                 raise TypeError(f"{name} must be a string, got {type(value).__name__}")
-    if not (type(reconstruct) is bool and type(dense_output) is bool and type(reproject) is bool
-            and type(progress) is bool):
-        for name, value in (("reconstruct", reconstruct), ("dense_output", dense_output), ("reproject", reproject),
-                            ("progress", progress)):
+    if not (type(dense_output) is bool and type(reproject) is bool and type(progress) is bool):
+        for name, value in (("dense_output", dense_output), ("reproject", reproject), ("progress", progress)):
             if not isinstance(value, (bool, np.bool_)):
                 raise TypeError(f"{name} must be True or False, got {type(value).__name__}")
     if isinstance(h, (bool, np.bool_)):
@@ -180,9 +175,6 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     atol = check_positive(atol, "atol")
     if first_step is not None:
         first_step = check_positive(first_step, "first_step")
-    if is_model and form != "auto":
-        raise ValueError(f"form={form!r} chooses the model of a SuslovSystem; system is already a model "
-                         f"({type(system).__name__}): pass the system, or leave form out")
     if meth.adaptive:
         step0 = 0.0
         if first_step is not None:
@@ -212,8 +204,31 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
 
 
 # ---------------------------------------------------------------------------------------------------------
+def system_is_model(system) -> bool:
+    """True for a model (:class:`ModelProtocol`), False for a :class:`SuslovSystem`; a TypeError naming
+    ``system`` for anything else. (The SuslovSystem test first: a runtime Protocol check walks the class's
+    attributes, ~20 µs a call.)"""
+    if isinstance(system, SuslovSystem):
+        return False
+    if isinstance(system, ModelProtocol):
+        return True
+    raise TypeError(f"system must be a SuslovSystem (or a model such as system.model()), got {type(system).__name__}")
+
+
 def _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form):
-    """The model and the validated initial data: x0 (..., d), Gamma0, g0, the broadcast batch shape."""
+    """The model and the validated initial data: x0 (..., d), Gamma0, g0, the broadcast batch shape.
+
+    The one reading of initial data: integrate, ensemble and the research tools call it (``is_model`` from
+    :func:`system_is_model`); it also checks the types of ``reconstruct`` and ``form``, which choose the model.
+    """
+    if type(reconstruct) is not bool and not isinstance(reconstruct, np.bool_):
+        raise TypeError(f"reconstruct must be True or False, got {type(reconstruct).__name__}")
+    if type(form) is not str:
+        raise TypeError(f"form must be a string, got {type(form).__name__}")
+    reconstruct = bool(reconstruct)
+    if is_model and form != "auto":
+        raise ValueError(f"form={form!r} chooses the model of a SuslovSystem; system is already a model "
+                         f"({type(system).__name__}): pass the system, or leave form out")
     if is_model:
         model = system
         if Gamma0 is not None and not model.has_gamma:
