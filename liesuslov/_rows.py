@@ -29,11 +29,22 @@ def rows_at(x, M) -> np.ndarray:
     return np.einsum("...i,i->..." if np.ndim(M) == 1 else "...i,ij->...j", x, M)
 
 
+def real_floats(x, name: str) -> np.ndarray:
+    """``x`` as floats; a complex (or non-numeric) array is a TypeError naming it (numpy would drop the imaginary
+    part with a warning). One dtype test on arrays that are floats already."""
+    x = np.asarray(x)
+    if x.dtype != np.float64:
+        if x.dtype.kind not in "fiub":
+            raise TypeError(f"{name} must be real numbers, got an array of {x.dtype}")
+        x = x.astype(float)
+    return x
+
+
 def vectors(x, name: str, size: int, owner: object = None) -> np.ndarray:
     """``x`` as a float array of vectors (..., size), or a ``ValueError`` naming it (and ``owner``, e.g. the
     algebra) — the check of the batch methods of the algebra layer (numpy's IndexError or broadcasting
     message named neither the argument nor the size it needs)."""
-    x = np.asarray(x, dtype=float)
+    x = real_floats(x, name)
     if x.shape[-1:] != (size,):
         where = "" if owner is None else f" for {owner}"
         raise ValueError(f"{name} must have shape (..., {size}){where}, got {x.shape}")

@@ -869,3 +869,13 @@ def test_a_3x3_omega_near_a_skew_matrix_is_refused_on_so3_not_read_as_three_vect
     free = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])), constraints="none")
     with pytest.raises(ValueError, match="Omega0 of shape"):
         ls.integrate(free, near, (0.0, 1.0), h=0.1)
+
+
+def test_hat_and_vee_refuse_complex_input():
+    """numpy dropped the imaginary part with a ComplexWarning (an audit); float32 and integers still convert."""
+    for call in (lambda: ls.so(3).hat([1j, 2.0, 3.0]), lambda: ls.so(4).vee(1j * np.eye(4)),
+                 lambda: ls.se(2).vee(1j * np.eye(3)), lambda: ls.se(2).hat([1j, 0.0, 0.0])):
+        with pytest.raises(TypeError, match="must be real numbers"):
+            call()
+    assert ls.so(3).hat(np.float32([1.0, 2.0, 3.0])).dtype == np.float64
+    assert np.array_equal(ls.so(3).vee(ls.so(3).hat([1, 2, 3])), [1.0, 2.0, 3.0])

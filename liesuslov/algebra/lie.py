@@ -12,7 +12,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .._rows import rows_at, vectors
+from .._rows import real_floats, rows_at, vectors
 from .._validation import as_float_array
 
 __all__ = ["LieAlgebra", "se"]
@@ -213,7 +213,7 @@ class LieAlgebra:
         ndarray, shape (..., d)
         """
         R = self._require_rep()
-        X = np.asarray(X, dtype=float)
+        X = real_floats(X, "X")
         m = R.shape[1]
         if X.shape[-2:] != (m, m):
             raise ValueError(f"X must have shape (..., {m}, {m}) for {self.name}, got {X.shape}")

@@ -16,7 +16,7 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 
-from .._rows import vectors
+from .._rows import real_floats, vectors
 from .lie import LieAlgebra
 
 __all__ = ["SpecialOrthogonalAlgebra", "so", "wedge", "pairing", "hat3", "vee3"]
@@ -96,7 +96,7 @@ class SpecialOrthogonalAlgebra(LieAlgebra):
 
     def vee(self, X) -> np.ndarray:
         """Skew matrices to coordinates: ``(..., n, n) -> (..., d)``, the upper-triangle entries."""
-        X = np.asarray(X, dtype=float)
+        X = real_floats(X, "X")
         if X.shape[-2:] != (self.n, self.n):
             raise ValueError(f"X must have shape (..., {self.n}, {self.n}) for {self.name}, got {X.shape}")
         return X[..., self._rows, self._cols]
