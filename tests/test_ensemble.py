@@ -3,7 +3,6 @@ stores, samplers, reductions, lost workers, pickling, xarray export, bad input."
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 import pickle
@@ -39,37 +38,21 @@ def _initial(shape=(5, 4), seed=0):
     return system, Omega0, Gamma0
 
 
-@functools.lru_cache(maxsize=1)
-def _per_trajectory() -> bool:
-    """True once integrate runs each trajectory on its own (API.md, second milestone: a status per trajectory)."""
-    system, Omega0, Gamma0 = _initial((2,))
-    return np.ndim(ls.integrate(system, Omega0, T_SPAN, Gamma0=Gamma0, **FIXED).status) > 0
-
-
 def _assert_same(ens, sol, final_only=False):
-    """Bitwise equal. Before the per-trajectory integrate, only to 1e-13: its batch-vectorised numpy stepper
-    (which backend="auto" picks above 200 trajectories, or without numba) rounds differently per batch size."""
+    """Bitwise equal (a trajectory's numbers do not depend on its batch mates, so chunks change nothing)."""
     rows = slice(-1, None) if final_only else slice(None)
-    # equal_nan: every value after a terminal event stopped a trajectory is NaN
-    same = ((lambda a, b: np.array_equal(a, b, equal_nan=True)) if _per_trajectory() else
-            (lambda a, b: np.allclose(a, b, rtol=0, atol=1e-13, equal_nan=True)))
     assert np.array_equal(ens.t, sol.t[rows])
     for name in ("omega", "xi", "Gamma", "g", "Omega"):
         a, b = getattr(ens, name), getattr(sol, name)
         assert (a is None) == (b is None), name
         if a is not None:
             assert a.shape == b[rows].shape, name
-            assert same(a, b[rows]), f"{name}: max difference {np.nanmax(np.abs(a - b[rows]))}"
-    assert ens.status.shape == sol.omega.shape[1:-1]
-    assert np.array_equal(ens.status, np.broadcast_to(sol.status, ens.status.shape))
+            # equal_nan: every value after a terminal event stopped a trajectory is NaN
+            assert np.array_equal(a, b[rows], equal_nan=True), \
+                f"{name}: max difference {np.nanmax(np.abs(a - b[rows]))}"
+    assert np.shape(sol.status) == ens.status.shape == sol.omega.shape[1:-1]  # a status per trajectory
+    assert np.array_equal(ens.status, sol.status)
     assert ens.success == bool(np.all(np.asarray(sol.status) >= 0))
-
-
-def _skip_unless_per_trajectory(sol):
-    # before the per-trajectory time loop (API.md, second milestone) an adaptive batch shares one step
-    # size, so a chunk's numbers depend on its batch mates
-    if not _per_trajectory():
-        pytest.xfail("adaptive bitwise equality needs integrate's per-trajectory time loop (status per trajectory)")
 
 
 @dataclass(frozen=True)
@@ -125,7 +108,6 @@ def test_adaptive_equals_one_integrate_call(chunk_size):
     system, Omega0, Gamma0 = _initial()
     sol = ls.integrate(system, Omega0, T_SPAN, Gamma0=Gamma0, t_eval=[0.0, 1.5], **ADAPTIVE)
     ens = ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, chunk_size=chunk_size, **ADAPTIVE)
-    _skip_unless_per_trajectory(sol)
     _assert_same(ens, sol)
 
 
@@ -529,8 +511,6 @@ def test_dask_equals_one_integrate_call(client, options):
     sol = ls.integrate(system, Omega0, T_SPAN, Gamma0=Gamma0, t_eval=[0.0, 0.7, 1.5], **options)
     runs = [ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, t_eval=[0.0, 0.7, 1.5], chunk_size=cs, executor=client,
                      **options) for cs in (1, 7, None)]
-    if options is ADAPTIVE:
-        _skip_unless_per_trajectory(sol)
     for ens in runs:
         _assert_same(ens, sol)
         assert ens.stats["executor"] == "Client"

@@ -99,14 +99,16 @@ def test_abelian_so2_equals_classical_rk(method, backend):
 
 @pytest.mark.parametrize("backend", [pytest.param("numpy", marks=pytest.mark.slow), "auto"])
 def test_structure_exact_after_1e5_steps(backend):
+    """The chart alone keeps g in SO(3) and |Gamma| = 1 over 1e5 steps (re-orthonormalisation off: measured
+    3.8e-14 and 1.8e-14, ~N eps / 600; a chart leaking 1e-16 a step would end near 1e-11)."""
     system, Omega0, Gamma0 = kt_scene(3)
     sol = ls.integrate(system, Omega0, (0.0, 1000.0), Gamma0=Gamma0, reconstruct=True, method="rkmk4",
-                       h=0.01, t_eval=[1000.0], backend=backend)
+                       h=0.01, t_eval=[1000.0], backend=backend, reproject=False)
     assert sol.stats["steps"] == 100_000
     g = sol.g[-1]
     assert np.max(np.abs(g.T @ g - np.eye(3))) < 1e-12
     assert abs(np.linalg.det(g) - 1) < 1e-12
-    assert abs(np.linalg.norm(sol.Gamma[-1]) - 1) < 1e-13
+    assert abs(np.linalg.norm(sol.Gamma[-1]) - 1) < 1e-12
     assert np.max(np.abs(system.constraints.complement().coordinates(sol.omega))) == 0.0
     E = system.energy(sol.Omega, sol.Gamma)
     E0 = system.energy(Omega0, Gamma0)
@@ -149,15 +151,17 @@ def test_adaptive_error_falls_with_tolerance(backend):
     system, Omega0, Gamma0 = general_scene(4)
     om_ref, g_ref = embedded_reference(system, Omega0, 5.0, [5.0], Gamma0)  # scipy's DOP853, rtol 1e-13
     ref_state = np.concatenate([om_ref[-1], g_ref[-1].ravel()])
-    for method in ("rkmk23", "rkmk45", "rkmk853"):
-        errs = []
-        for rtol in (1e-4, 1e-7, 1e-10):
+    # error / rtol measured (both backends, to 3 digits) at rtol 1e-4, 1e-7, 1e-10; the band of 1.5x either way
+    # fails an error norm off by a factor 2 (which moves the error by 2^(p/(p+1)) = 1.7-1.9x) or a controller
+    # that stops adapting (an audit: "falls with the tolerance" passed with the norm divided by 100)
+    measured = {"rkmk23": (3.10, 2.78, 2.74), "rkmk45": (1.47, 0.213, 0.205), "rkmk853": (0.071, 0.052, 0.137)}
+    for method, ratios in measured.items():
+        for rtol, ratio in zip((1e-4, 1e-7, 1e-10), ratios, strict=True):
             sol = ls.integrate(system, Omega0, (0.0, 5.0), Gamma0=Gamma0, reconstruct=True, method=method,
                                rtol=rtol, atol=rtol * 1e-2, t_eval=[5.0], backend=backend)
             assert sol.success
-            errs.append(np.max(np.abs(end_state(sol) - ref_state)))
-        assert errs[0] > errs[1] > errs[2] or errs[2] < 1e-11, (method, errs)
-        assert errs[2] < 1e-7, (method, errs)
+            err = np.max(np.abs(end_state(sol) - ref_state))
+            assert ratio / 1.5 < err / rtol < 1.5 * ratio, (method, rtol, err / rtol)
 
 
 def test_t_eval_hit_exactly_and_backward_integration():

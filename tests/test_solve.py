@@ -551,23 +551,26 @@ def test_one_trajectory_ends_at_its_terminal_event(backend):
 # ---------------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_adaptive_error_tracks_rtol(backend):
-    """Global error at t = 20 within a small factor of rtol on the free body and the KT body in SO(4)."""
+    """Global error at t = 20 within a small factor of rtol on the free body and the KT body in SO(4): measured
+    0.02-0.12 rtol; the band [rtol/200, rtol/2] fails an error norm off by 10 either way (an audit: 20 rtol let
+    a norm divided by 10 pass)."""
     system = free_body()
     w0 = np.array([0.3, 1.0, 0.4])
     _, g_ref = embedded_reference(system, w0, 20.0, [20.0])
     for rtol in (1e-6, 1e-9):
         sol = ls.integrate(system, w0, (0.0, 20.0), reconstruct=True, method="rkmk45", rtol=rtol, atol=rtol * 1e-2,
                            t_eval=[20.0], backend=backend)
-        assert np.max(np.abs(sol.g[-1] - g_ref[-1])) < 20 * rtol
+        assert rtol / 200 < np.max(np.abs(sol.g[-1] - g_ref[-1])) < rtol / 2
     kt, Omega0, Gamma0 = kt_body()
     _, g_ref = embedded_reference(kt, ls.so(4).vee(Omega0), 20.0, [20.0], Gamma0)
     for rtol in (1e-6, 1e-9):
         sol = ls.integrate(kt, Omega0, (0.0, 20.0), Gamma0=Gamma0, reconstruct=True, method="rkmk853", rtol=rtol,
                            atol=rtol * 1e-2, t_eval=[20.0], backend=backend)
-        assert np.max(np.abs(sol.g[-1] - g_ref[-1])) < 20 * rtol
+        assert rtol / 200 < np.max(np.abs(sol.g[-1] - g_ref[-1])) < rtol / 2
 
 
-def test_global_error_at_equal_rtol_is_near_scipys_on_a_hard_state():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_global_error_at_equal_rtol_is_near_scipys_on_a_hard_state(backend):
     """An audit's state of the KT body: at rtol 1e-8 the global error of rkmk853 was 26x that of scipy's DOP853
     on the same embedded ODE (22x at 1e-6, 49x at 1e-10) — the DOP853 estimator applied to the chart stages
     underestimates RKMK's local error on coupled scenes. With the method's error_scale (20) it is 1.7x; the
@@ -592,7 +595,7 @@ def test_global_error_at_equal_rtol_is_near_scipys_on_a_hard_state():
                        atol=1e-2 * rtol, t_eval=t_eval)
         scipy_error = np.max(np.abs(sc.y[-16:].T.reshape(-1, 4, 4) - g_ref))
         sol = ls.integrate(kt, omega0, (0.0, 20.0), Gamma0=Gamma0, reconstruct=True, method="rkmk853", rtol=rtol,
-                           atol=1e-2 * rtol, t_eval=t_eval, backend="numpy")
+                           atol=1e-2 * rtol, t_eval=t_eval, backend=backend)
         assert np.max(np.abs(sol.g - g_ref)) < 3.0 * scipy_error, rtol
 
 
