@@ -269,7 +269,10 @@ def test_dense_output_order(method):
     g = rotations(rng, 1, 4).reshape(1, -1)
     gamma = unit(rng, 1, 4)
     plan = make_plan(get_tableau(METHODS[method].tableau))
-    hs = {"rkmk23": np.array([0.1, 0.05]), "rkmk45": np.array([0.2, 0.1]), "rkmk853": np.array([0.4, 0.2])}[method]
+    # the local error of the extension at theta = 0.37 of one step, against a tight run that ends at that time
+    # (its own steps, no extension involved): h^(q+1) for an extension of order q, fitted on three step sizes
+    # (measured slopes 3.83, 5.28, 7.90); test_solve.py's dense-order test checks against scipy instead
+    hs = {"rkmk23": 0.1, "rkmk45": 0.2, "rkmk853": 0.4}[method] / np.array([1.0, 2.0, 4.0])
     errs = []
     for h in hs:
         te = 0.37 * h
@@ -282,8 +285,8 @@ def test_dense_output_order(method):
         errs.append(max(np.abs(res.xi[0] - ref.xi[0]).max(), np.abs(res.G[0] - ref.G[0]).max()))
         Gt = res.G[0, 0].reshape(4, 4)
         assert np.abs(Gt.T @ Gt - np.eye(4)).max() < 10 * EPS  # exact structure at interpolated times
-    slope = np.log(errs[0] / errs[1]) / np.log(hs[0] / hs[1])
-    assert slope > plan.dense_order + 1 - 0.6, (errs, slope)
+    slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
+    assert abs(slope - (plan.dense_order + 1)) < 0.5, (errs, slope)
 
 
 @pytest.mark.parametrize("scene", range(len(SCENES)), ids=[s[0] for s in SCENES])
