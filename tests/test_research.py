@@ -663,3 +663,19 @@ def test_lyapunov_failure_says_when_and_why_and_long_runs_are_refused():
     assert np.isnan(lam)
     with pytest.raises(ValueError, match="renormalisation intervals.*pass renormalize_every >= 1e-05"):
         ls.lyapunov_exponent(top, W[0], (0.0, 10.0), Gamma0=[0.0, 0.6, 0.8], renormalize_every=1e-6)
+
+
+def test_lyapunov_progress_is_one_bar_over_the_intervals(capsys):
+    """progress=True went to every interval's integrate call (one bar of 2B trajectories per interval): now one
+    bar over the intervals, and the same numbers."""
+    pytest.importorskip("tqdm")
+    top = ls.SuslovSystem(ls.Inertia.from_principal_moments([1.0, 2.0, 3.0]), constraints="none",
+                          potential=ls.LinearPotential([1.0, 0.7, 0.4]))
+    kw = dict(Gamma0=[0.0, 0.6, 0.8], seed=0)
+    plain = ls.lyapunov_exponent(top, [0.3, -0.5, 0.9], (0.0, 50.0), **kw)
+    capsys.readouterr()
+    shown = ls.lyapunov_exponent(top, [0.3, -0.5, 0.9], (0.0, 50.0), progress=True, **kw)
+    err = capsys.readouterr().err
+    assert shown == plain and "10/10" in err and err.count("lyapunov_exponent") >= 1 and "trajectory" not in err
+    with pytest.raises(TypeError, match="progress must be True or False"):
+        ls.lyapunov_exponent(top, [0.3, -0.5, 0.9], (0.0, 50.0), progress="yes", **kw)

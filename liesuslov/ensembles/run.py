@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from .._progress import progress_bar
 from .._validation import as_float_array, check_t_eval, check_t_span
 from ..integrators.integrate import _initial_data, system_is_model
 from ..integrators.problem import run_message
@@ -509,10 +510,4 @@ def _store_error(root: Path, exc: OSError) -> Exception:
 
 
 def _progress_bar(on: bool, total: int):
-    if not on:
-        return None
-    try:
-        from tqdm.auto import tqdm
-    except ImportError as exc:
-        raise ValueError("progress=True (the CLI's --progress) needs tqdm: pip install 'liesuslov[progress]'") from exc
-    return tqdm(total=total, unit="traj", desc="ensemble")
+    return progress_bar(total, "traj", "ensemble") if on else None

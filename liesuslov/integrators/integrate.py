@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .._progress import progress_bar
 from .._validation import (
     as_float_array,
     check_positive,
@@ -425,13 +426,9 @@ def _run(solver, P: Problem, progress: bool) -> RawResult:
     as it ends; the compiled batch, which has no Python per trajectory, reports them all at its end)."""
     if not progress:
         return solver.solve(P)
-    try:
-        from tqdm.auto import tqdm
-    except ImportError as exc:
-        raise ValueError("progress=True (the CLI's --progress) needs tqdm: pip install 'liesuslov[progress]'") from exc
     from . import solve_numpy
 
-    with tqdm(total=P.B, unit="trajectory", leave=False, mininterval=0.0) as bar:
+    with progress_bar(P.B, "trajectory", leave=False) as bar:
         if solver is solve_numpy:
             return solver.solve(P, done=bar.update)
         raw = solver.solve(P)

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from .._progress import progress_bar
 from .._rows import rows_at
 from ..integrators import integrate
 from ..integrators.problem import FAILURES
@@ -145,7 +146,8 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
     return_history : bool
         Return a :class:`LyapunovResult` (the running estimate and its convergence) instead of the array.
     **options
-        ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``. Each interval
+        ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``; ``progress=True``
+        shows one bar over the renormalisation intervals (needs tqdm). Each interval
         is one ``integrate`` call on the batch of ``2B`` trajectories (reference and companion): ``max_steps``
         bounds each interval's steps, and a run has at most :data:`MAX_INTERVALS` intervals.
 
@@ -168,6 +170,10 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
     if delta >= 1e-2:
         raise ValueError(f"delta must be small (the companion's distance, e.g. 1e-7), got {delta:g}")
     opts = R.options_with_defaults(options)
+    # one bar over the renormalisation intervals (integrate's own, per call, would be K bars of 2B trajectories)
+    progress = opts.pop("progress", False)
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"progress must be True or False, got {type(progress).__name__}")
     b = R.prepare(system, Omega0, Gamma0)
     span = t1 - t0
     # the rounding of the states, ~eps |s|, must stay far below delta, and its share of the estimate,
@@ -213,6 +219,7 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
     t_stop = np.full(B, np.nan)
     message = ""
     t_prev = 0.0
+    bar = progress_bar(K, "interval", "lyapunov_exponent") if progress else None
     for j in range(K):
         t_next = span * (j + 1) / K  # the interval's end, from t0 (an array of K would be 1.6 GB at t = 1e9)
         om = rows_at(np.concatenate([xi, xi_p]), Dbasis)
@@ -265,6 +272,10 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
                 G = np.where(bad[:, None], b.Gamma, G)
                 G_p = np.where(bad[:, None], G, G_p)
         t_prev = t_next
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
     lam = hist[-1].reshape(b.shape)
     if not return_history:
         if message:
