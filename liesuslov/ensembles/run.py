@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 
 from .._progress import progress_bar
-from .._validation import as_float_array, check_t_eval, check_t_span
+from .._validation import check_t_eval, check_t_span
 from ..integrators.integrate import _initial_data, system_is_model
 from ..integrators.problem import run_message
-from .checks import _nonneg_int, _positive_int
+from .checks import _as_given, _naming, _nonneg_int, _positive_int
 from .constants import (
     _ARRAYS,
     _CORE,
@@ -151,10 +151,10 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
             raise ValueError("n (the number of trajectories to draw) is required with sampler=...")
         batch_shape = (_positive_int(n, "n"),)
         seed_parts = _seed_parts(seed)
-        # the drawn states are checked by integrate on the workers; these two here, with integrate's helper
+        # the drawn states are checked by integrate on the workers; these two by each chunk's integrate too
         for key, v in (("Gamma0", Gamma0), ("g0", g0)):
             if v is not None:
-                init[key] = as_float_array(v, key, ndim_min=_CORE[key])
+                init[key] = _as_given(v, key, _CORE[key])
         _broadcast_batch(init, batch_shape)
     else:
         if Omega0 is None:
@@ -394,12 +394,9 @@ def _given_initial_data(system, is_model, Omega0, Gamma0, g0, options) -> tuple[
     _, x0, _, _, batch_shape = _initial_data(system, is_model, Omega0, Gamma0, g0, options.get("reconstruct", False),
                                              options.get("form", "auto"))
     init = {"Omega0": x0}
-    # already checked by _initial_data: only the conversion (no copy of a float array); a float32 array stays
-    # one, so that each chunk's integrate grants it float32's tolerance, as the whole batch's call did
-    for key, v in (("Gamma0", Gamma0), ("g0", g0)):
+    for key, v in (("Gamma0", Gamma0), ("g0", g0)):  # already checked by _initial_data
         if v is not None:
-            a = np.asarray(v)
-            init[key] = a if np.issubdtype(a.dtype, np.floating) else as_float_array(v, key)
+            init[key] = _as_given(v, key, _CORE[key])
     return init, tuple(batch_shape)
 
 
@@ -506,7 +503,7 @@ def _store_error(root: Path, exc: OSError) -> Exception:
                           "you can write to")
     message = (f"{where} cannot be written ({exc.strerror or exc}); pass a directory you can write to, or free "
                "space on its disk")
-    return type(exc)(message) if exc.errno is None else type(exc)(exc.errno, message, exc.filename)
+    return _naming(exc, message)
 
 
 def _progress_bar(on: bool, total: int):

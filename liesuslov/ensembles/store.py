@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from .._io import atomic_write
+from .checks import _naming
 from .constants import (
     _ARRAYS,
     _EVENT,
@@ -89,7 +90,7 @@ def _read_manifest(root: Path, path: Path) -> dict:
         man = json.loads(path.read_bytes().decode("utf-8"))
     except OSError as exc:  # the OS's reason (permissions, ...): its own class, the argument named
         message = f"{where} cannot be read ({exc.strerror or exc}); pass a store you can read"
-        raise (type(exc)(message) if exc.errno is None else type(exc)(exc.errno, message, exc.filename)) from exc
+        raise _naming(exc, message) from exc
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{where} is not valid JSON ({exc}); the file is damaged: {fix}") from exc
     if not isinstance(man, dict):
