@@ -29,13 +29,14 @@ def rows_at(x, M) -> np.ndarray:
     return np.einsum("...i,i->..." if np.ndim(M) == 1 else "...i,ij->...j", x, M)
 
 
-def real_floats(x, name: str) -> np.ndarray:
-    """``x`` as floats; a complex (or non-numeric) array is a TypeError naming it (numpy would drop the imaginary
-    part with a warning). One dtype test on arrays that are floats already."""
+def real_floats(x, name: str, must: str = "must be real numbers") -> np.ndarray:
+    """``x`` as floats; a complex (or non-numeric) array is a TypeError ``f"{name} {must}, got ..."`` (numpy would
+    drop the imaginary part with a warning). One dtype test on arrays that are floats already. The one such
+    check: of inputs (hat, vee, vectors) and of what user callables return (potentials)."""
     x = np.asarray(x)
     if x.dtype != np.float64:
         if x.dtype.kind not in "fiub":
-            raise TypeError(f"{name} must be real numbers, got an array of {x.dtype}")
+            raise TypeError(f"{name} {must}, got an array of {x.dtype}")
         x = x.astype(float)
     return x
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._rows import real_floats
 from .._validation import as_float_array, unit_vectors
 from ..algebra.elements import omega_coordinates
 
@@ -204,10 +205,7 @@ class LinearEvent:
 
 
 def _real(x, name: str) -> np.ndarray:
-    arr = np.asarray(x)
-    if np.iscomplexobj(arr) or not np.issubdtype(arr.dtype, np.number):
-        raise TypeError(f"LinearEvent {name} must be real numbers, got dtype {arr.dtype}")
-    arr = arr.astype(float)
+    arr = np.array(real_floats(x, f"LinearEvent {name}"))  # (a copy: the event keeps its coefficients)
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"LinearEvent {name} must be finite")
     return arr

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._rows import rows_at
+from .._rows import real_floats, rows_at
 from .._validation import as_float_array, read_only
 
 __all__ = ["Potential", "ZeroPotential", "LinearPotential", "QuadraticPotential", "FamilyPotential",
@@ -37,11 +37,8 @@ def real_values(value, label: str) -> np.ndarray:
     """``value`` as a float array; a complex (or object) result of a user callable is a TypeError.
 
     numpy would cast it with a ComplexWarning and drop the imaginary part: a potential meant differently."""
-    array = np.asarray(value)
-    if array.dtype.kind not in "biuf":
-        raise TypeError(f"{label} must return real numbers: got dtype {array.dtype}; return the real part if "
-                        f"that is the potential meant")
-    return array.astype(float, copy=False)
+    return real_floats(value, label, "must return real numbers (return the real part if that is the potential "
+                                     "meant)")
 
 
 class Potential:
