@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["rows_at", "vectors"]
+__all__ = ["rows_at", "vectors", "matrices", "paired"]
 
 
 def rows_at(x, M) -> np.ndarray:
@@ -50,3 +50,25 @@ def vectors(x, name: str, size: int, owner: object = None) -> np.ndarray:
         where = "" if owner is None else f" for {owner}"
         raise ValueError(f"{name} must have shape (..., {size}){where}, got {x.shape}")
     return x
+
+
+def matrices(x, name: str, size: int, owner: object = None) -> np.ndarray:
+    """``x`` as a float array of square matrices (..., size, size), or a ``ValueError`` naming it (numpy would
+    read the entries it indexes of a matrix of another size, or fail naming neither)."""
+    x = real_floats(x, name)
+    if x.shape[-2:] != (size, size):
+        where = "" if owner is None else f" for {owner}"
+        raise ValueError(f"{name} must have shape (..., {size}, {size}){where}, got {x.shape}")
+    return x
+
+
+def paired(x: np.ndarray, y: np.ndarray, names: str, core: int = 1) -> None:
+    """Raise a ``ValueError`` naming ``names`` (e.g. "x and y") when the batch shapes of ``x`` and ``y`` (all but
+    their last ``core`` axes) do not broadcast: numpy's message names neither argument (and a batched
+    product of matrices speaks of "remapped shapes")."""
+    a, b = x.shape[:x.ndim - core], y.shape[:y.ndim - core]
+    try:
+        np.broadcast_shapes(a, b)
+    except ValueError:
+        raise ValueError(f"{names} must have batch shapes that broadcast (equal, or 1 where they differ), got "
+                         f"{x.shape} and {y.shape}") from None

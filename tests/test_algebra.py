@@ -879,3 +879,39 @@ def test_hat_and_vee_refuse_complex_input():
             call()
     assert ls.so(3).hat(np.float32([1.0, 2.0, 3.0])).dtype == np.float64
     assert np.array_equal(ls.so(3).vee(ls.so(3).hat([1, 2, 3])), [1.0, 2.0, 3.0])
+
+
+@pytest.mark.parametrize("alg", [ls.so(4), ls.se(2)], ids=["so4", "se2"])
+def test_binary_operations_name_batches_that_do_not_broadcast(alg):
+    """bracket/coad/pairing of batches (2,) and (3,) gave numpy's "remapped shapes" message naming neither argument."""
+    d = alg.dim
+    with pytest.raises(ValueError, match=rf"x and y must have batch shapes that broadcast.*\(2, {d}\) and \(3, {d}\)"):
+        alg.bracket(np.ones((2, d)), np.ones((3, d)))
+    with pytest.raises(ValueError, match="x and m must have batch shapes"):
+        alg.coad(np.ones((2, d)), np.ones((3, d)))
+    # broadcasting batches still work, and agree with the element-wise result
+    x, y = np.random.default_rng(0).standard_normal((2, 3, d))
+    out = alg.bracket(x[:, None, :], y[None, :, :])
+    assert out.shape == (3, 3, d)
+    assert np.allclose(out[1, 2], alg.bracket(x[1], y[2]), rtol=0, atol=1e-15)
+
+
+def test_so_helpers_refuse_wrong_sizes():
+    """Read silently before: pairing of 7-vectors on so(4) summed them (7.0); hat3 of a 4-vector dropped its last
+    entry; vee3 of a 4x4 matrix read three of its entries."""
+    from liesuslov.algebra import hat3, pairing, vee3, wedge
+
+    cases = [(lambda: ls.so(4).pairing(np.ones(7), np.ones(7)), r"x must have shape \(\.\.\., 6\) for so\(4\)"),
+             (lambda: ls.so(4).pairing(np.ones((2, 6)), np.ones((3, 6))), "x and y must have batch shapes"),
+             (lambda: hat3(np.ones(4)), r"w must have shape \(\.\.\., 3\)"),
+             (lambda: vee3(np.eye(4)), r"W must have shape \(\.\.\., 3, 3\)"),
+             (lambda: wedge(np.ones(3), np.ones(4)), r"y must have shape \(\.\.\., 3\)"),
+             (lambda: wedge(np.ones((2, 3)), np.ones((3, 3))), "x and y must have batch shapes"),
+             (lambda: pairing(np.eye(3), np.eye(4)), r"B must have shape \(\.\.\., 3, 3\)"),
+             (lambda: pairing(np.ones(3), np.ones(3)), r"A must have shape \(\.\.\., n, n\)")]
+    for call, message in cases:
+        with pytest.raises(ValueError, match=message):
+            call()
+    w = np.array([0.3, -1.2, 0.7])
+    assert np.array_equal(vee3(hat3(w)), w)
+    assert np.isclose(pairing(hat3(w), hat3(w)), w @ w, rtol=1e-15)

@@ -12,7 +12,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .._rows import real_floats, rows_at, vectors
+from .._rows import paired, real_floats, rows_at, vectors
 from .._validation import as_float_array
 
 __all__ = ["LieAlgebra", "se"]
@@ -113,6 +113,7 @@ class LieAlgebra:
         """
         x = vectors(x, "x", self._dim, self.name)
         y = vectors(y, "y", self._dim, self.name)
+        paired(x, y, "x and y")
         return np.einsum("...j,...jk->...k", y, self._contract(x))
 
     def ad(self, x) -> np.ndarray:
@@ -155,6 +156,7 @@ class LieAlgebra:
         """
         x = vectors(x, "x", self._dim, self.name)
         m = vectors(m, "m", self._dim, self.name)
+        paired(x, m, "x and m")
         return np.einsum("...jk,...k->...j", self._contract(x), m)
 
     @cached_property

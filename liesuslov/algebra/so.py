@@ -16,7 +16,7 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 
-from .._rows import real_floats, vectors
+from .._rows import matrices, paired, real_floats, vectors
 from .lie import LieAlgebra
 
 __all__ = ["SpecialOrthogonalAlgebra", "so", "wedge", "pairing", "hat3", "vee3"]
@@ -104,6 +104,9 @@ class SpecialOrthogonalAlgebra(LieAlgebra):
     # ------------------------------------------------------------------ operations
     def bracket(self, x, y) -> np.ndarray:
         """``[x, y] = vee(XY - YX)`` by the matrix commutator, batched ``(..., d)``."""
+        x = vectors(x, "x", self._dim, self.name)
+        y = vectors(y, "y", self._dim, self.name)
+        paired(x, y, "x and y")
         X = self.hat(x)
         Y = self.hat(y)
         return self.vee(X @ Y - Y @ X)
@@ -117,13 +120,19 @@ class SpecialOrthogonalAlgebra(LieAlgebra):
 
     def coad(self, x, m) -> np.ndarray:
         """Coadjoint action ``ad*_x m = [M, X]`` (so(n)* identified with so(n) by the pairing)."""
+        x = vectors(x, "x", self._dim, self.name)
+        m = vectors(m, "m", self._dim, self.name)
+        paired(x, m, "x and m")
         X = self.hat(x)
         M = self.hat(m)
         return self.vee(M @ X - X @ M)
 
     def pairing(self, x, y) -> np.ndarray:
         """``<x, y> = -1/2 tr(XY)``: the Euclidean product of coordinates, shape (...)."""
-        return np.sum(np.asarray(x, dtype=float) * np.asarray(y, dtype=float), axis=-1)
+        x = vectors(x, "x", self._dim, self.name)
+        y = vectors(y, "y", self._dim, self.name)
+        paired(x, y, "x and y")
+        return np.sum(x * y, axis=-1)
 
     # ------------------------------------------------------------------ n = 3
     def to_vector3(self, x) -> np.ndarray:
@@ -175,22 +184,28 @@ def wedge(x, y) -> np.ndarray:
 
     For n = 3, ``x ∧ y = hat(y × x)``.
     """
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
+    x = real_floats(x, "x")
+    if x.ndim == 0 or x.shape[-1] < 2:
+        raise ValueError(f"x must have shape (..., n) with n >= 2, got {x.shape}")
+    y = vectors(y, "y", x.shape[-1])
+    paired(x, y, "x and y")
     P = x[..., :, None] * y[..., None, :]
     return P - np.swapaxes(P, -1, -2)
 
 
 def pairing(A, B) -> np.ndarray:
     """``<A, B> = -1/2 tr(AB)`` for matrices of shape (..., n, n); returns (...)."""
-    A = np.asarray(A, dtype=float)
-    B = np.asarray(B, dtype=float)
+    A = real_floats(A, "A")
+    if A.ndim < 2 or A.shape[-1] != A.shape[-2]:
+        raise ValueError(f"A must have shape (..., n, n), got {A.shape}")
+    B = matrices(B, "B", A.shape[-1])
+    paired(A, B, "A and B", core=2)
     return -0.5 * np.einsum("...ij,...ji->...", A, B)
 
 
 def hat3(w) -> np.ndarray:
     """``hat(w)`` with ``hat(w) v = w × v``: (..., 3) -> (..., 3, 3)."""
-    w = np.asarray(w, dtype=float)
+    w = vectors(w, "w", 3)
     z = np.zeros_like(w[..., 0])
     return np.stack([np.stack([z, -w[..., 2], w[..., 1]], -1),
                      np.stack([w[..., 2], z, -w[..., 0]], -1),
@@ -199,5 +214,5 @@ def hat3(w) -> np.ndarray:
 
 def vee3(W) -> np.ndarray:
     """Inverse of :func:`hat3`: (..., 3, 3) -> (..., 3)."""
-    W = np.asarray(W, dtype=float)
+    W = matrices(W, "W", 3)
     return np.stack([W[..., 2, 1], W[..., 0, 2], W[..., 1, 0]], axis=-1)
