@@ -248,4 +248,4 @@ def check_t_eval(t_eval, t0: float, t1: float) -> np.ndarray:
     first, last = float(te[0]), float(te[-1])
     if min(first, last) < min(t0, t1) or max(first, last) > max(t0, t1):
         raise ValueError(f"t_eval must lie within t_span = ({t0}, {t1})")
-    return np.ascontiguousarray(te)
+    return np.array(te, order="C")  # a copy: the solution's t must not be the caller's array (nor change with it)

@@ -162,6 +162,29 @@ def test_kinds_and_check():
         kernel.check(make_problem(user, np.zeros((1, user.k)), G0=[0.0, 0.0, 1.0], mode="gamma"))
 
 
+def test_a_model_the_kernel_refuses_is_not_kept_alive():
+    """The refusal was cached with its traceback, whose frames (the caller's too) held the model, the weak key of
+    the cache: a new system per call (a parameter sweep) kept every caller's data alive (an audit: +190 MB per
+    call of a function holding 200 MB)."""
+    import gc
+    import weakref
+
+    class Data:  # the caller's own data, unrelated to the solve
+        pass
+
+    def user_step():
+        data = Data()
+        system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])),
+                                 potential=ls.Potential(lambda G: np.sum(G ** 4, axis=-1), lambda G: 4 * G ** 3))
+        sol = ls.integrate(system, [0.0, 0.3, 0.2], (0.0, 0.1), Gamma0=[0.0, 0.0, 1.0], h=0.05)
+        assert "polynomial" in sol.stats["backend_reason"]
+        return weakref.ref(data), weakref.ref(system)
+
+    refs = [user_step() for _ in range(2)]
+    gc.collect()
+    assert all(r() is None for pair in refs for r in pair)
+
+
 def test_batch_equals_alone_bitwise():
     rng = np.random.default_rng(5)
     model = ls.cases.klebsh_tisserand([1.0, 1.3, 1.7, 2.0], [4.0, 3.5, 3.0, 1.0]).system.model(gamma=True)

@@ -352,6 +352,17 @@ def test_at_does_not_depend_on_the_callers_arrays_afterwards():
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
+def test_sol_t_is_not_the_callers_t_eval(backend):
+    """On numpy, sol.t was the caller's t_eval array itself: writing one wrote the other (an audit)."""
+    system, Omega0, Gamma0 = kt_body()
+    te = np.linspace(0.0, 1.0, 5)
+    sol = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, h=0.05, t_eval=te, backend=backend)
+    assert not np.shares_memory(sol.t, te)
+    te[:] = -1.0
+    assert np.array_equal(sol.t, np.linspace(0.0, 1.0, 5))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 def test_g0_near_the_group_is_moved_onto_it(backend):
     """g0 within the 1e-8 tolerance but off SO(4) (or SE(3)'s rotation block) starts on the group: the structure
     is exact from t0 on, not 1e-9 off at every time (an audit)."""

@@ -173,7 +173,9 @@ def _cached(cache: dict, key: str, probe, model):
         try:
             cache[key] = probe(model)
         except NotCompilable as exc:
-            cache[key] = exc
+            # kept as a fresh exception: the raised one's traceback holds the caller's frames, and through
+            # them the model, the weak key of the cache (a new model per call then leaked the caller's data)
+            cache[key] = NotCompilable(str(exc))
     out = cache[key]
     if isinstance(out, NotCompilable):
         raise NotCompilable(str(out))

@@ -75,7 +75,7 @@ def _prepare(problem: Problem, cache: dict):
         try:
             out = _judge(problem.model, mode, problem.chart, kind, problem.skew, problem.m)
         except NotCompilable as exc:
-            out = exc
+            out = NotCompilable(str(exc))  # not exc: its traceback would keep the model, the cache's weak key
         cache[key] = out
     if isinstance(out, NotCompilable):
         raise NotCompilable(str(out))
