@@ -13,11 +13,21 @@ import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-__all__ = ["atomic_write", "write_text", "publish"]
+__all__ = ["atomic_write", "atomic_create", "write_text", "publish"]
 
 
 def _umask_mode() -> int:
-    """0o666 less the process umask: the mode an ordinary ``open(path, "w")`` would give."""
+    """0o666 less the process umask: the mode an ordinary ``open(path, "w")`` would give.
+
+    Read from ``/proc/self/status`` where Linux says it: the only portable way, setting the umask and back, leaves
+    it 0 for a moment, in which a file another thread creates gets mode 0o666 (world-writable)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return 0o666 & ~int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
     mask = os.umask(0)
     os.umask(mask)
     return 0o666 & ~mask
@@ -50,6 +60,43 @@ def atomic_write(path, write: Callable[[str], object]) -> Path:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    return p
+
+
+def atomic_create(path, data: bytes) -> Path:
+    """Create ``path`` holding ``data``, whole, only if no file has that name: else ``FileExistsError``.
+
+    The claim of a name by two writers at once (two runs started on one ensemble store): the file is written
+    under a temporary name and hard-linked into place (``os.link`` fails if the name exists, and readers see
+    the whole file or none); on a file system without hard links, an exclusive create (``open(path, "xb")``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to create; its folder must exist.
+    data : bytes
+        Its whole content.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    p = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}-", suffix=p.suffix, dir=p.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.chmod(tmp, _umask_mode())
+        try:
+            os.link(tmp, p)
+        except FileExistsError:
+            raise
+        except OSError:  # no hard links here (FAT, some network or FUSE file systems)
+            with open(p, "xb") as f:
+                f.write(data)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
     return p
 
 

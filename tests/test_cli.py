@@ -278,3 +278,28 @@ def test_run_refuses_an_output_folder_it_cannot_make_before_integrating(tmp_path
     fresh = tmp_path / "new" / "out"
     assert cli.main(["run", "--out", str(fresh), "--no-figures"]) == 1  # (the stub reports a failed run)
     assert called and not fresh.exists()  # probed, then left as it was
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX file modes")
+def test_atomic_files_get_the_umask_mode_without_changing_the_umask(tmp_path, monkeypatch):
+    """Files written atomically get the mode an ordinary open() would (mkstemp makes 0o600), read without
+    setting the umask to 0 for a moment (a file another thread created then was world-writable)."""
+    import os
+
+    from liesuslov import _io
+
+    calls = []
+    real_umask = os.umask
+    monkeypatch.setattr(os, "umask", lambda m: calls.append(m) or real_umask(m))
+    old = real_umask(0o027)
+    try:
+        path = _io.write_text(tmp_path / "a.txt", "x")
+        created = _io.atomic_create(tmp_path / "b.txt", b"y")
+        assert (path.stat().st_mode & 0o777) == (created.stat().st_mode & 0o777) == 0o640
+        if Path("/proc/self/status").is_file():
+            assert calls == []
+        with pytest.raises(FileExistsError):
+            _io.atomic_create(tmp_path / "b.txt", b"z")
+        assert created.read_bytes() == b"y" and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt"]
+    finally:
+        real_umask(old)

@@ -263,6 +263,59 @@ def test_store_round_trip_and_partial_store(tmp_path):
         open_ensemble(tmp_path)
 
 
+def test_two_runs_on_one_store_at_once_do_not_mix(tmp_path, monkeypatch):
+    """Two runs started on one store at the same moment both passed the check for a manifest, both reported
+    success, and the store held chunks of both (an audit: 1664 of one seed, 384 of the other). The store is
+    now claimed by creating its manifest exclusively; a run that replaces it with overwrite=True while another
+    runs is detected by the run id every chunk file carries."""
+    from liesuslov.ensembles import run as run_module
+    from liesuslov.ensembles import store as store_module
+
+    system, Omega0, Gamma0 = _initial()
+    kw = dict(Gamma0=Gamma0, chunk_size=6, **FIXED)
+    store = tmp_path / "s"
+    real_prepare = run_module._prepare_store
+
+    def other_run_claims_first(st, overwrite):  # the other run creates its manifest right after this one's check
+        root = real_prepare(st, overwrite)
+        monkeypatch.setattr(run_module, "_prepare_store", real_prepare)  # (the other run is not interrupted)
+        ensemble(system, Omega0, T_SPAN, store=root, **kw)
+        return root
+
+    monkeypatch.setattr(run_module, "_prepare_store", other_run_claims_first)
+    with pytest.raises(ValueError, match="another run started on it at the same time"):
+        ensemble(system, 2 * Omega0, T_SPAN, store=store, **kw)
+    monkeypatch.undo()
+    first = open_ensemble(store)
+    assert first.complete and np.array_equal(first.omega, ensemble(system, Omega0, T_SPAN, **kw).omega)
+
+    # replaced during the run (overwrite=True elsewhere): this run fails loudly, and the store's reader refuses
+    # the chunk files that are not its manifest's run's
+    real_write = store_module._write_shard
+    calls = []
+
+    def replaced_after_the_first_chunk(root, i, payload, run):
+        real_write(root, i, payload, run)
+        calls.append(i)
+        if len(calls) == 1:
+            man = json.loads((root / "manifest.json").read_text())
+            man["run"] = "another-run"
+            (root / "manifest.json").write_text(json.dumps(man))
+
+    monkeypatch.setattr(run_module, "_write_shard", replaced_after_the_first_chunk)
+    with pytest.raises(RuntimeError, match="was replaced by another run"):
+        ensemble(system, Omega0, T_SPAN, store=store, overwrite=True, **kw)
+    with pytest.raises(ValueError, match="written by another run than the manifest's"):
+        open_ensemble(store)  # (a partial store: its times are read off a chunk file)
+    # a finished store with one chunk file of another run in it: refused when that chunk is read
+    ensemble(system, Omega0, T_SPAN, store=tmp_path / "a", **kw)
+    ensemble(system, Omega0, T_SPAN, store=tmp_path / "b", **kw)
+    (tmp_path / "b" / "chunk-000002.npz").replace(tmp_path / "a" / "chunk-000002.npz")
+    mixed = open_ensemble(tmp_path / "a")
+    with pytest.raises(ValueError, match="chunk-000002.npz was written by another run"):
+        _ = mixed.omega
+
+
 def test_a_store_killed_mid_run_reopens_with_the_counts_of_the_computed_trajectories(tmp_path):
     """SIGKILL after 3 of 20 chunks: the reopened store has nfev/steps/rejected (as a Solution's), summed over
     the 15 trajectories computed, and the run's seed (drawn fresh: seed=None), so its initial data can be redrawn."""

@@ -162,6 +162,48 @@ def test_kinds_and_check():
         kernel.check(make_problem(user, np.zeros((1, user.k)), G0=[0.0, 0.0, 1.0], mode="gamma"))
 
 
+def test_first_calls_in_several_threads_compile_or_load_one_at_a_time(monkeypatch):
+    """numba's loading from its cache is not thread-safe: first calls of a process in 8 threads at once failed
+    in 1 process of 5 ("generator already executing", an audit). The first use of a family is serialised;
+    checked here by making that first use slow and counting the threads inside it."""
+    import threading
+    import time
+
+    from liesuslov.integrators.kernel import wrapper
+
+    inside, most, guard = [0], [0], threading.Lock()
+    real = wrapper._compile_apart
+
+    def slow_first_use(family, sig):
+        with guard:
+            inside[0] += 1
+            most[0] = max(most[0], inside[0])
+        time.sleep(0.05)
+        real(family, sig)
+        with guard:
+            inside[0] -= 1
+
+    monkeypatch.setattr(wrapper, "_LOOPS", {})  # every family's first use again (loaded from the cache)
+    monkeypatch.setattr(wrapper, "_compile_apart", slow_first_use)
+    monkeypatch.setattr(wrapper._solve_one, "overloads", {})
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])),
+                             potential=ls.LinearPotential([0.2, 0.0, 1.0]))
+    Omega0 = system.constraints.basis[0] * 0.5
+    barrier, out = threading.Barrier(4), []
+
+    def call():
+        barrier.wait()
+        out.append(ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=[0.0, 0.6, 0.8], h=0.01, backend="numba"))
+
+    threads = [threading.Thread(target=call) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(out) == 4 and most[0] == 1
+    assert all(np.array_equal(sol.omega, out[0].omega) for sol in out)
+
+
 def test_a_model_the_kernel_refuses_is_not_kept_alive():
     """The refusal was cached with its traceback, whose frames (the caller's too) held the model, the weak key of
     the cache: a new system per call (a parameter sweep) kept every caller's data alive (an audit: +190 MB per

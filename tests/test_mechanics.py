@@ -807,3 +807,39 @@ def test_mismatched_shapes_are_named():
     with pytest.raises(ValueError, match=r"batch axes of Omega \(2,\) and Gamma \(3,\) do not broadcast"):
         system.energy(np.zeros((2, 6)), np.full((3, 4), 0.5))
     assert system.energy(np.zeros((2, 6)), np.array([0.0, 0.0, 0.6, 0.8])).shape == (2,)
+
+
+def test_cached_properties_do_not_serialise_instances():
+    """On Python < 3.12 functools.cached_property holds one lock per attribute for all instances: a thread inside
+    one system's cached property blocked every other system's first read, and a process forked then hung in
+    the child (an audit). The package's cached_property holds none."""
+    import threading
+
+    from liesuslov._cached import cached_property
+
+    assert isinstance(ls.SuslovSystem.__dict__["_forms"], cached_property)
+    entered, release = threading.Event(), threading.Event()
+
+    class Slow:
+        def __init__(self, wait):
+            self.wait = wait
+
+        @cached_property
+        def value(self):
+            if self.wait:
+                entered.set()
+                release.wait(10.0)
+            return 1.0
+
+    inside = threading.Thread(target=lambda: Slow(True).value)
+    inside.start()
+    assert entered.wait(10.0)
+    done = []
+    other = threading.Thread(target=lambda: done.append(Slow(False).value))
+    other.start()
+    other.join(2.0)
+    blocked = other.is_alive()
+    release.set()
+    inside.join()
+    other.join()
+    assert not blocked and done == [1.0]

@@ -13,10 +13,9 @@ so a body in SO(256) costs O(n²) memory and its reduced model O(n²) time.
 
 from __future__ import annotations
 
-from functools import cached_property
-
 import numpy as np
 
+from .._cached import cached_property
 from .._rows import rows_at, vectors
 from .._validation import as_float_array, check_symmetric
 from .lie import LieAlgebra

@@ -8,10 +8,9 @@ coordinates (so(n)'s pairing -1/2 tr(AB) is exactly that in its basis, see :mod:
 
 from __future__ import annotations
 
-from functools import cached_property
-
 import numpy as np
 
+from .._cached import cached_property
 from .._rows import paired, real_floats, rows_at, vectors
 from .._validation import as_float_array
 

@@ -12,10 +12,11 @@ n = 3: ``Omega = hat(w)`` with ``hat(w) v = w x v``, i.e. ``w = (-Omega_23, Omeg
 
 from __future__ import annotations
 
-from functools import cached_property, lru_cache
+from functools import lru_cache
 
 import numpy as np
 
+from .._cached import cached_property
 from .._rows import matrices, paired, real_floats, vectors
 from .lie import LieAlgebra
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import zipfile
 from collections.abc import Iterator
@@ -21,20 +22,34 @@ from .constants import (
 
 # ====================================================================== reading a shard
 @contextmanager
-def _read_shard(path: Path):
-    """``np.load`` of a store's shard, a damaged one (truncated, overwritten, not an .npz) a ValueError naming it.
+def _read_shard(path: Path, run: str | None = None):
+    """``np.load`` of a store's shard, a damaged one (truncated, overwritten, not an .npz) a ValueError naming it,
+    and one written by another run than ``run`` (the manifest's id, when it has one) a ValueError too.
 
     numpy's own message for a file that is not an .npz suggests ``allow_pickle=True``, which is wrong here: a
     shard holds no object arrays. Reading a member lazily (``z[key]``) can fail as well, so the whole ``with``
     body is covered: keep it to reading the shard.
     """
+    other = None
     try:
         with np.load(path, allow_pickle=False) as z:
-            yield z
+            other = _shard_run(z) if run is not None else None
+            if other in (None, run):
+                yield z
     except (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile) as exc:
         raise ValueError(f"store {str(path.parent)!r}: the shard {path.name} is damaged or not written by ensemble "
                          f"({type(exc).__name__} reading it); delete it (its trajectories then read as missing) "
                          "or run the ensemble again with overwrite=True") from exc
+    if other not in (None, run):
+        raise ValueError(f"store {str(path.parent)!r}: the shard {path.name} was written by another run than the "
+                         "manifest's (two runs wrote this store at once, one of them with overwrite=True): its "
+                         "numbers are not this ensemble's; run the ensemble again with overwrite=True")
+
+
+def _shard_run(z) -> str | None:
+    """The run id in a shard's ``__meta__`` (None in a store written before runs had ids)."""
+    meta = json.loads(z["__meta__"].tobytes().decode())
+    return meta.get("run") if isinstance(meta, dict) else None
 
 
 # ====================================================================== the result
@@ -76,7 +91,7 @@ class Ensemble:
 
     def __init__(self, *, t, batch_shape, bounds, tails, stats, n=None, algebra_name="", message="",
                  arrays=None, status=None, store=None, present=None, traj_stats=None, complete=None,
-                 n_events=0, event_parts=None):
+                 n_events=0, event_parts=None, run=None):
         self._t = np.asarray(t, dtype=float)
         self.batch_shape = tuple(int(b) for b in batch_shape)
         self._bounds = [tuple(map(int, b)) for b in bounds]
@@ -90,6 +105,7 @@ class Ensemble:
         self._arrays = arrays
         self._status = status
         self.store = None if store is None else Path(store)
+        self._run = run  # the id of the run that wrote the store: every shard read is checked against it
         self._present = present
         self._n_events = int(n_events)
         # in memory: one dict of event arrays (shard keys) per finished chunk; a store reads its shards
@@ -144,7 +160,7 @@ class Ensemble:
         out = np.full(self._B, np.nan if dt.kind == "f" else 0, dtype=dt)
         for i, (a, b) in enumerate(self._bounds):
             if self._has(i):
-                with _read_shard(self._shard(i)) as z:
+                with _read_shard(self._shard(i), self._run) as z:
                     if _STAT + name in z.files:
                         out[a:b] = z[_STAT + name]
         return out
@@ -161,7 +177,7 @@ class Ensemble:
             parts = []
             for i in range(len(self._bounds)):
                 if self._has(i):
-                    with _read_shard(self._shard(i)) as z:
+                    with _read_shard(self._shard(i), self._run) as z:
                         parts.append({k: z[k] for k in z.files if k.startswith(_EVENT)})
         out = []
         for j in range(self._n_events):
@@ -185,7 +201,7 @@ class Ensemble:
         st = np.full(self._B, -1, dtype=np.int64)
         for i, (a, b) in enumerate(self._bounds):
             if self._has(i):
-                with _read_shard(self._shard(i)) as z:
+                with _read_shard(self._shard(i), self._run) as z:
                     st[a:b] = z["status"]
         return st.reshape(self.batch_shape)
 
@@ -216,7 +232,7 @@ class Ensemble:
         out = np.full((self._t.size, self._B) + self._tails[name], np.nan)
         for i, (a, b) in enumerate(self._bounds):
             if self._has(i):
-                with _read_shard(self._shard(i)) as z:
+                with _read_shard(self._shard(i), self._run) as z:
                     if name in z.files:
                         out[:, a:b] = z[name]
         return out.reshape((self._t.size,) + self.batch_shape + self._tails[name])
@@ -231,7 +247,8 @@ class Ensemble:
                 flat["status"] = self.status.reshape(-1)[a:b]
                 yield a, b, flat
             elif self._has(i):
-                with _read_shard(self._shard(i)) as z:  # read, then yield outside: the caller's errors are its own
+                # read, then yield outside: the caller's errors are its own
+                with _read_shard(self._shard(i), self._run) as z:
                     arrays = {k: z[k] for k in (*_ARRAYS, "status") if k in z.files}
                 yield a, b, arrays
 

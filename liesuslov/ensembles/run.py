@@ -7,6 +7,7 @@ import math
 import os
 import pickle
 import time
+import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -32,7 +33,7 @@ from .constants import (
 from .executors import _check_running, _n_workers, _pickles, _submit, _wait_first
 from .result import Ensemble
 from .sampling import _seed_parts
-from .store import _merge_stats, _write_manifest, _write_shard, open_ensemble
+from .store import _claim_store, _merge_stats, _run_on_disk, _write_manifest, _write_shard, open_ensemble
 from .tasks import _Task
 
 
@@ -95,7 +96,7 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     max_in_flight : int, optional
         Chunks submitted but not yet collected (default 3 per worker): bounds memory.
     overwrite : bool
-        Replace an existing store.
+        Replace an existing store (one run writes a store at a time: see the RuntimeError below).
     **options
         Passed to :func:`~liesuslov.integrate` (``method``, ``h``, ``rtol``, ``atol``, ``reconstruct``,
         ``chart``, ``backend``, ``events``, ...); with ``events`` (callables that pickle, as ``system``) the
@@ -112,9 +113,12 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     ------
     ValueError, TypeError
         Bad arguments, naming the argument (also a bad initial state drawn on a worker); a store path that
-        cannot be a directory is a ValueError naming ``store``.
+        cannot be a directory is a ValueError naming ``store``, and so is a store another run claimed first
+        (two runs started on one directory at once).
     OSError
         A store directory the system will not let this process write (its class, ``store`` named).
+    RuntimeError
+        The store was replaced by another run (``overwrite=True``) while this one ran.
     """
     from ..integrators import integrate
 
@@ -196,11 +200,15 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     root = None
     if store is not None:
         root = _prepare_store(store, overwrite)
-    manifest = {"format": FORMAT, "batch_shape": list(batch_shape), "bounds": bounds, "complete": False,
-                "chunk_size": chunk_size, "t_span": [t0, t1], "stats": run_stats}
+    run_id = uuid.uuid4().hex  # the store's manifest and every chunk file it writes carry it
+    manifest = {"format": FORMAT, "run": run_id, "batch_shape": list(batch_shape), "bounds": bounds,
+                "complete": False, "chunk_size": chunk_size, "t_span": [t0, t1], "stats": run_stats}
     if root is not None:
         try:
-            _write_manifest(root, manifest)
+            _claim_store(root, manifest)
+        except FileExistsError:
+            raise ValueError(f"store {str(root)!r} already holds an ensemble: another run started on it at the same "
+                             "time; pass another directory (or overwrite=True once that run is over)") from None
         except OSError as exc:  # a directory that exists but takes no files (permissions, a read-only disk)
             raise _store_error(root, exc) from exc
 
@@ -219,7 +227,8 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
                                  "tails": None, "meta": None, "stats": [], "failed": [], "retries": 0,
                                  "traj_stats": {}, "events": [],
                                  # what the run's message reads, whatever the store (16 bytes a trajectory)
-                                 "ends": {"t_stop": np.full(B, np.nan), "failure": np.zeros(B, dtype=np.int64)}}
+                                 "ends": {"t_stop": np.full(B, np.nan), "failure": np.zeros(B, dtype=np.int64)},
+                                 "run": run_id}
     try:
         _run_all(executor, make_task, bounds, retries, max_in_flight, collected, root, bar)
     finally:
@@ -246,6 +255,10 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
                                   "events": n_events},
                          "stats": stats, "message": message,
                          "trajectory_stats": {k: v.dtype.str for k, v in collected["traj_stats"].items()}})
+        if _run_on_disk(root) != run_id:  # another run replaced the store (overwrite=True) while this one ran
+            raise RuntimeError(f"store {str(root)!r} was replaced by another run (overwrite=True) while this one ran: "
+                               "this run's chunks there are mixed with that run's; run it again into another "
+                               "directory")
         _write_manifest(root, manifest)
         ens = open_ensemble(root)
         ens.message = message
@@ -359,7 +372,7 @@ def _collect(i: int, bound, payload: dict, collected: dict, root: Path | None) -
             if name in collected["ends"]:
                 collected["ends"][name][a:b] = v
     if root is not None:
-        _write_shard(root, i, payload)
+        _write_shard(root, i, payload, collected["run"])
         return
     collected["events"].append({k: v for k, v in payload.items() if k.startswith(_EVENT)})
     if collected["arrays"] is None:

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from .._io import atomic_write
+from .._io import atomic_create, atomic_write
 from .checks import _naming
 from .constants import (
     _ARRAYS,
@@ -40,8 +40,8 @@ def _merge_stats(chunk_stats: list[dict]) -> dict:
     return out
 
 
-def _read_meta(path: Path) -> dict:
-    with _read_shard(path) as z:  # (a damaged meta is a damaged shard: the ValueError names it)
+def _read_meta(path: Path, run: str | None = None) -> dict:
+    with _read_shard(path, run) as z:  # (a damaged meta is a damaged shard: the ValueError names it)
         meta = json.loads(z["__meta__"].tobytes().decode())
         if not isinstance(meta, dict):
             raise ValueError(f"__meta__ is a JSON {type(meta).__name__}, not an object")
@@ -68,16 +68,36 @@ def _jsonable(x):
     return str(x)
 
 
+def _manifest_bytes(manifest: dict) -> bytes:
+    return json.dumps(manifest, default=_jsonable, indent=1).encode()
+
+
+def _claim_store(store: Path, manifest: dict) -> None:
+    """Write the run's first manifest, only if the store has none (``FileExistsError`` else): of two runs started
+    on one store at once, both passed the check for a manifest and wrote into each other's chunks (an audit).
+    The manifest carries the run's id (``manifest["run"]``), which every chunk file of the run carries too."""
+    atomic_create(store / MANIFEST, _manifest_bytes(manifest))
+
+
+def _run_on_disk(store: Path) -> str | None:
+    """The run id of the manifest in ``store`` now (None if it has none or cannot be read)."""
+    try:
+        man = json.loads((store / MANIFEST).read_bytes().decode("utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return man.get("run") if isinstance(man, dict) else None
+
+
 def _write_manifest(store: Path, manifest: dict) -> None:
-    text = json.dumps(manifest, default=_jsonable, indent=1).encode()
+    text = _manifest_bytes(manifest)
     _atomic_write(store / MANIFEST, lambda f: f.write(text))
 
 
-def _write_shard(store: Path, i: int, payload: dict) -> None:
+def _write_shard(store: Path, i: int, payload: dict, run: str) -> None:
     arrays = {k: v for k, v in payload.items()
               if k in ("t", *_ARRAYS, "status") or k.startswith(_STAT) or k.startswith(_EVENT)}
     # UTF-8 bytes, not a numpy unicode string (4 bytes a character)
-    meta = np.frombuffer(json.dumps(payload["meta"], default=_jsonable).encode(), dtype=np.uint8)
+    meta = np.frombuffer(json.dumps({**payload["meta"], "run": run}, default=_jsonable).encode(), dtype=np.uint8)
     _atomic_write(store / _shard_name(i), lambda f: np.savez(f, **arrays, __meta__=meta))
 
 
@@ -143,7 +163,8 @@ def open_ensemble(store) -> Ensemble:
         If ``store`` holds no ``manifest.json``.
     ValueError
         If the manifest is of another format, damaged (not JSON, keys missing or malformed), or no chunk has
-        finished yet; a damaged shard is a ValueError naming it when it is read.
+        finished yet; a damaged shard, or one written by another run than the manifest's (two runs on one
+        store, one with ``overwrite=True``), is a ValueError naming it when it is read.
     """
     if not isinstance(store, (str, os.PathLike)):
         raise TypeError(f"store must be a path (str or os.PathLike), got {type(store).__name__}")
@@ -153,17 +174,20 @@ def open_ensemble(store) -> Ensemble:
         raise FileNotFoundError(f"store {str(root)!r} holds no {MANIFEST}: not an ensemble store (or the run "
                                 "has not started); pass the directory given as ensemble(..., store=DIR)")
     man = _read_manifest(root, path)
-    bounds = man["bounds"]
+    bounds, run = man["bounds"], man.get("run")
+    if run is not None and not isinstance(run, str):
+        raise ValueError(f"store {str(root)!r}: {MANIFEST}: run must be a string, got {type(run).__name__}; the file "
+                         "is damaged: run the ensemble again with overwrite=True")
     present = [(root / _shard_name(i)).is_file() for i in range(len(bounds))]
     first = next((i for i, p in enumerate(present) if p), None)
     t, tails, meta = man.get("t"), man.get("tails"), man.get("meta", {})
     if t is None or tails is None:  # the run stopped before its end: read them off a finished shard
         if first is None:
             raise ValueError(f"store {str(root)!r}: no chunk has finished yet (0 of {len(bounds)}); nothing to read")
-        with _read_shard(root / _shard_name(first)) as z:
+        with _read_shard(root / _shard_name(first), run) as z:
             t = z["t"]
             tails = {k: z[k].shape[2:] for k in _ARRAYS if k in z.files}
-        meta = _read_meta(root / _shard_name(first))
+        meta = _read_meta(root / _shard_name(first), run)
     stats = dict(man.get("stats", {}))
     # a finished run writes no shard for a chunk that failed: those are in failed_chunks, not missing
     failed = {int(f["chunk"]) for f in stats.get("failed_chunks", [])} if man.get("complete") else set()
@@ -175,16 +199,16 @@ def open_ensemble(store) -> Ensemble:
     if missing or not man.get("complete"):
         # the manifest's counts are those of a finished run: here, the sums over the chunks in the store
         stats = {k: v for k, v in stats.items() if k not in _SUMMED}
-        shard_stats = [_read_meta(root / _shard_name(i)).get("stats", {}) for i, p in enumerate(present) if p]
+        shard_stats = [_read_meta(root / _shard_name(i), run).get("stats", {}) for i, p in enumerate(present) if p]
         stats = {**_merge_stats(shard_stats), **stats}
         stats.setdefault("failed_chunks", [])
     traj_stats = man.get("trajectory_stats")
     if traj_stats is None:
         traj_stats = {}
         if first is not None:
-            with _read_shard(root / _shard_name(first)) as z:
+            with _read_shard(root / _shard_name(first), run) as z:
                 traj_stats = {k[len(_STAT):]: z[k].dtype.str for k in z.files if k.startswith(_STAT)}
     return Ensemble(t=t, batch_shape=man["batch_shape"], bounds=bounds, tails=tails, stats=stats,
                     n=meta.get("n"), algebra_name=meta.get("algebra_name", ""), message=message,
                     store=root, present=present, traj_stats=traj_stats, complete=not missing,
-                    n_events=int(meta.get("events", 0) or 0))
+                    n_events=int(meta.get("events", 0) or 0), run=run)

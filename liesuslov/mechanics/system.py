@@ -17,11 +17,11 @@ BLAS).
 
 from __future__ import annotations
 
-from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
 
+from .._cached import cached_property
 from .._rows import rows_at
 from .._validation import as_float_array, check_real
 from ..algebra import Inertia, SpecialOrthogonalAlgebra, Subspace, omega_coordinates, suslov_distribution

@@ -177,6 +177,10 @@ def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool, 
 
 
 _LOOPS: dict = {}
+#: Held while a family's loop is compiled or loaded: numba's loading from its cache (``load_overload``, the
+#: target context's ``refresh``) is not thread-safe — first calls in several threads at once failed at random
+#: ("generator already executing", "key already in dictionary", an audit).
+_COMPILE_LOCK = threading.Lock()
 
 
 def _compiled(family: int, args: tuple):
@@ -189,12 +193,16 @@ def _compiled(family: int, args: tuple):
     """
     entry = _LOOPS.get(family)
     if entry is None:
-        sig = (numba.types.literal(family), numba.types.int64, numba.types.int64) + tuple(numba.typeof(a) for a in args)
-        if sig not in _solve_one.overloads:
-            _compile_apart(family, sig)
-        _solve_one.compile(sig)
-        compiled = _solve_one.overloads[sig].entry_point
-        entry = _LOOPS[family] = lambda lo, hi, *rest: compiled(family, lo, hi, *rest)
+        with _COMPILE_LOCK:
+            entry = _LOOPS.get(family)  # (another thread may have made it while this one waited)
+            if entry is None:
+                sig = ((numba.types.literal(family), numba.types.int64, numba.types.int64)
+                       + tuple(numba.typeof(a) for a in args))
+                if sig not in _solve_one.overloads:
+                    _compile_apart(family, sig)
+                _solve_one.compile(sig)
+                compiled = _solve_one.overloads[sig].entry_point
+                entry = _LOOPS[family] = lambda lo, hi, *rest: compiled(family, lo, hi, *rest)
     return entry
 
 
@@ -263,9 +271,9 @@ _POOL_LOCK = threading.Lock()
 
 
 def _forget_pool() -> None:
-    """In a forked child: no pool yet, and a lock nobody holds."""
-    global _POOL, _POOL_LOCK
-    _POOL, _POOL_LOCK = None, threading.Lock()
+    """In a forked child: no pool yet, and locks nobody holds."""
+    global _POOL, _POOL_LOCK, _COMPILE_LOCK
+    _POOL, _POOL_LOCK, _COMPILE_LOCK = None, threading.Lock(), threading.Lock()
 
 
 if hasattr(os, "register_at_fork"):  # (POSIX; there is no fork elsewhere)
