@@ -915,3 +915,23 @@ def test_so_helpers_refuse_wrong_sizes():
     w = np.array([0.3, -1.2, 0.7])
     assert np.array_equal(vee3(hat3(w)), w)
     assert np.isclose(pairing(hat3(w), hat3(w)), w @ w, rtol=1e-15)
+
+
+def test_membership_of_huge_vectors_is_decided_without_overflow():
+    """Above |x| ~ 1e154 the squares overflowed and inf <= inf accepted any vector: integrate took an Omega0 off
+    D and dropped its off-D part (an audit). The test is relative: the scale does not change the answer."""
+    D = ls.suslov_distribution(3)
+    off, on = np.array([0.5, 1.0, 0.0]), np.array([0.0, 1.0, 0.3])
+    for scale in (1.0, 1e150, 1e160, 1e300):
+        assert not D.contains(off * scale) and D.contains(on * scale)
+        assert np.array_equal(D.contains(np.stack([off, on]) * scale), [False, True])
+        assert np.isclose(D.distance(off * scale), 0.5 * scale, rtol=1e-15)
+    D6 = ls.suslov_distribution(6)  # a batch of rows through the basis (not the single-vector paths)
+    x = np.zeros((3, D6.algebra.dim))
+    x[:, D6.algebra.index(0, 5)] = 1e200
+    x[1, D6.algebra.index(0, 1)] = 1e199
+    assert np.array_equal(D6.contains(x), [True, False, True])
+    assert not D.contains([np.inf, 1.0, 0.0]) and not D.contains([np.nan, 1.0, 0.0])
+    system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])))
+    with pytest.raises(ValueError, match=r"not in the constraint subspace D \(distance 5e\+159\)"):
+        ls.integrate(system, off * 1e160, (0.0, 1e-160), h=1e-161)

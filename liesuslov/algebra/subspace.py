@@ -8,6 +8,8 @@ so(n) is -1/2 tr(AB)).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._rows import rows_at, vectors
@@ -135,12 +137,30 @@ class Subspace:
                 x2 = 0.0
                 for v in vals:
                     x2 += v * v
+                if x2 == math.inf:  # squares beyond the floats (|x| > 1e154): inf <= inf accepted anything
+                    return self._contains_huge(x, tol)
                 return np.bool_(r2 <= bound * x2 + floor)
-        if x.ndim == 1 and x.shape[0] <= _PROJECTOR_MAX_DIM:  # (one vector: ~4 µs; the batch form took ~10 µs)
-            r = self._residual_projector() @ x
-            return np.bool_(float(r @ r) <= bound * float(x @ x) + floor)
-        r = x - (x @ self.basis.T) @ self.basis
-        return np.add.reduce(r * r, axis=-1) <= bound * np.add.reduce(x * x, axis=-1) + floor
+        # (overflowing squares are caught below, not warned about: ~1 µs)
+        with np.errstate(over="ignore", invalid="ignore"):
+            if x.ndim == 1 and x.shape[0] <= _PROJECTOR_MAX_DIM:  # (one vector: ~4 µs; the batch form took ~10 µs)
+                r = self._residual_projector() @ x
+                x2 = float(x @ x)
+                if x2 == math.inf:
+                    return self._contains_huge(x, tol)
+                return np.bool_(float(r @ r) <= bound * x2 + floor)
+            r = x - (x @ self.basis.T) @ self.basis
+            x2 = np.add.reduce(x * x, axis=-1)
+            out = np.add.reduce(r * r, axis=-1) <= bound * x2 + floor
+        huge = x2 == math.inf
+        if np.any(huge):
+            out[huge] = self._contains_huge(x[huge], tol)
+        return out
+
+    def _contains_huge(self, x: np.ndarray, tol: float) -> np.ndarray:
+        """:meth:`contains` of vectors whose squares overflow, scaled to their largest entry first (the test is
+        relative; ``atol`` is nothing beside such a vector). An infinite entry stays refused (inf/inf is NaN)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            return self.contains(x / np.max(np.abs(x), axis=-1, keepdims=True), tol=tol)
 
     def _outside_axes(self) -> tuple[int, ...] | None:
         """The coordinate axes off D when D is a coordinate subspace (basis rows ±e_i), else None; kept.
@@ -215,6 +235,15 @@ class Subspace:
     def project(self, x, metric=None) -> np.ndarray:
         """Apply :meth:`projector` to a batch of vectors: (..., d) -> (..., d), each row summed alone."""
         return rows_at(vectors(x, "x", self.algebra.dim), self.projector(metric).T)
+
+    def distance(self, x) -> np.ndarray:
+        """``|x - P x|``, the distance of each vector to the subspace: (..., d) -> (...); no overflow for huge x
+        (a hypotenuse, not a root of squares: 1e160 vectors read inf)."""
+        x = vectors(x, "x", self.algebra.dim)
+        s = np.max(np.abs(x), axis=-1, keepdims=True, initial=0.0)
+        s = np.where(s > 0.0, s, 1.0)
+        y = x / s
+        return np.linalg.norm(y - self.project(y), axis=-1) * s[..., 0]
 
     # ------------------------------------------------------------------ Lie structure
     def _pair_brackets(self, U: np.ndarray, V: np.ndarray) -> np.ndarray:

@@ -40,6 +40,7 @@ not ``O(h^{k+1})``, because ``Θ = h c A + O(h²)`` and ``[A, A] = 0`` (Hairer�
 from __future__ import annotations
 
 from .cayley import (  # noqa: F401
+    _CAYLEY_LIMIT,
     _CAYLEY_POLISH,
     cayley,
     cayley_apply,

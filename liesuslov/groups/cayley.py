@@ -30,6 +30,10 @@ def cayley(X: np.ndarray) -> np.ndarray:
 
 
 _CAYLEY_POLISH = 1e2  # |X| above which the dense Cayley transform is re-orthonormalised
+#: The Cayley chart's numerical domain, |X|_F / sqrt 2 < 1/sqrt(eps) (6.7e7): beyond it the solve's orthogonality
+#: defect (~eps |X|², measured) is O(1), past what one Newton–Schulz step can restore; an integrator's step
+#: whose chart argument reaches it is rejected or fails (both solvers, every kind).
+_CAYLEY_LIMIT = float(np.finfo(float).eps) ** -0.5
 
 
 def cayley_skew(X: np.ndarray) -> np.ndarray:

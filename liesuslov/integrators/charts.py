@@ -329,9 +329,24 @@ def _rows_out(vals: tuple) -> np.ndarray:
     return np.array([vals]) if isinstance(vals[0], float) else np.stack(vals, axis=-1)
 
 
-def _in_domain(norm2):
-    """``|Theta|_F² < 2 pi²`` per trajectory: a (B,) bool array, or a bool for a float lane (NaN: False)."""
-    return norm2 < 2.0 * math.pi ** 2
+def domain_bound2(chart: str) -> float:
+    """The chart's domain as a bound on ``|Theta|_F²`` (of the block :func:`domain_block` says): ``2 pi²`` for the
+    exponential (a rotation angle below pi: dexp⁻¹ has its first pole at 2 pi, and the closed forms lose accuracy
+    past pi), ``2 L²`` for the Cayley map, ``L = 1/sqrt(eps)`` its numerical limit
+    (:data:`liesuslov.groups.cayley._CAYLEY_LIMIT`). The compiled kernel tests ``|Theta|_F² / 2`` against the
+    halves of the same numbers."""
+    return 2.0 * (math.pi ** 2 if chart == "exp" else groups._CAYLEY_LIMIT ** 2)
+
+
+def domain_block(algebra, m: int, skew: bool) -> int:
+    """The size of the leading block of an algebra element (m×m) whose norm the chart's domain bounds: ``m``, or
+    ``m - 1`` for an affine algebra (every element's last row zero, as se(n)'s): its translations, in the last
+    column, do not enter the eigenvalues of ``ad_Theta`` (those of the leading block's, and 0), so they do not
+    bring dexp⁻¹'s poles nearer; counting them rejected the steps of a fast-moving body (5x the steps)."""
+    if skew or m < 2:
+        return m
+    rep = np.asarray(algebra.representation)
+    return m - 1 if rep.shape[-2:] == (m, m) and not np.any(rep[:, -1, :]) else m
 
 
 def _sq3(w: tuple):
@@ -521,8 +536,8 @@ class _Kernel:
     * ``omega(ctx, Xi, X) -> om``: Omega at a stage, from its xi part as rows ``Xi`` (k, B) or as the
       contiguous ``X`` (B, 1, k) the model is given; ``first(om, out)``: write ``K_0 = Omega_0`` to a row.
     * ``load(ctx, flat) -> t``: the stage value ``Theta_i`` from its (q, B) part of a stage sum;
-      ``in_domain(t)``: ``|Theta|_F² < 2 pi²`` (the exponential's domain, see :mod:`.rkmk`), (B,) bool
-      (a bool for float lanes).
+      ``domain_norm2(t)``: ``|Theta|_F²`` (of the leading block, :func:`domain_block`), which the stepper
+      compares with the chart's :func:`domain_bound2`; (B,) (a float for float lanes).
     * ``act(ctx, t)``: ``phi(-Theta) Gamma0``, (B, n) C-contiguous (the model's input).
     * ``dinv(ctx, t, om, out)``: write ``K_i = dphi^{-1}_{-Theta_i}(Omega_i)`` to a row (q, B).
     * ``advance(ctx, G, t)``: ``G phi(Theta)``, (B, m, m), for the attitude.
@@ -565,6 +580,7 @@ class _DenseKernel(_MatrixKernel):
         self.exp, self.skew, self.terms = chart.name == "exp", chart.skew, chart.terms
         self.R = _omega_basis(model, m)
         self.omega_matrix = model.omega_matrix
+        self.dom = domain_block(model.algebra, m, self.skew)
 
     def begin(self, G, gamma, mode) -> _Context:
         return _Context(gam0=_start_vertical(G, gamma, mode))
@@ -580,8 +596,8 @@ class _DenseKernel(_MatrixKernel):
     def load(self, ctx, flat) -> np.ndarray:
         return np.ascontiguousarray(flat.T).reshape(-1, self.m, self.m)
 
-    def in_domain(self, T) -> np.ndarray:
-        return _in_domain(self._norm2(T))
+    def domain_norm2(self, T) -> np.ndarray:
+        return self._norm2(T if self.dom == self.m else np.ascontiguousarray(T[:, :self.dom, :self.dom]))
 
     def act(self, ctx, T) -> np.ndarray:
         return self._act_matrix(T, ctx.gam0)
@@ -646,8 +662,8 @@ class _CoordsKernel(_MatrixKernel):
         th = np.ascontiguousarray(flat.T)
         return th, np.matmul(th[:, None, :], self.E).reshape(-1, self.m, self.m)
 
-    def in_domain(self, t) -> np.ndarray:
-        return _in_domain(2.0 * np.sum(t[0] * t[0], axis=-1))  # |X|_F² = 2 |x|²
+    def domain_norm2(self, t) -> np.ndarray:
+        return 2.0 * np.sum(t[0] * t[0], axis=-1)  # |X|_F² = 2 |x|²
 
     def act(self, ctx, t) -> np.ndarray:
         return self._act_matrix(t[1], ctx.gam0)
@@ -729,8 +745,8 @@ class _So3Kernel(_ComponentKernel):
             co = (None, None, None, _dexp3_each(t2))
         return w, t2, co
 
-    def in_domain(self, t) -> np.ndarray:
-        return _in_domain(2.0 * t[1])  # |hat w|_F² = 2 |w|²
+    def domain_norm2(self, t) -> np.ndarray:
+        return 2.0 * t[1]  # |hat w|_F² = 2 |w|²
 
     def _inverse_map(self, t):
         """``v -> phi(-Theta) v = c v - a w × v + b (w·v) w`` on lanes, from Theta's coefficients."""
@@ -771,8 +787,8 @@ class _So4Kernel(_ComponentKernel):
         c = _lanes(flat)
         return c[:3], c[3:]
 
-    def in_domain(self, t) -> np.ndarray:
-        return _in_domain(4.0 * (_sq3(t[0]) + _sq3(t[1])))  # |X|_F² = 4 (|p|² + |q|²)
+    def domain_norm2(self, t) -> np.ndarray:
+        return 4.0 * (_sq3(t[0]) + _sq3(t[1]))  # |X|_F² = 4 (|p|² + |q|²)
 
     def _coefficients(self, p: tuple, q: tuple) -> tuple:
         """``phi(X) = c0 I + c1 P + c2 Q + c3 PQ`` (Cayley), or ``(cos|p|, sinc|p|, cos|q|, sinc|q|)`` (exp)."""
@@ -859,8 +875,8 @@ class _LowRankKernel(_MatrixKernel):
     def load(self, ctx, flat) -> np.ndarray:
         return np.ascontiguousarray(flat.T).reshape(-1, self.r, self.r)
 
-    def in_domain(self, M) -> np.ndarray:
-        return _in_domain(self._norm2(M))  # |Q M Q^T|_F = |M|_F
+    def domain_norm2(self, M) -> np.ndarray:
+        return self._norm2(M)  # |Q M Q^T|_F = |M|_F
 
     def _phi_active(self, ctx, M) -> np.ndarray:
         """``phi`` of the block of M on the columns built so far (Theta_i lies in their span)."""

@@ -248,7 +248,7 @@ def _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form):
     D = getattr(getattr(model, "system", None), "constraints", None) or model.subspace
     inside = D.contains(x0, 1e-9)
     if not (inside if inside.ndim == 0 else inside.all()):  # (ndarray.all: ~2 µs on one vector)
-        dist = np.max(np.linalg.norm(x0 - D.project(x0), axis=-1))
+        dist = np.max(D.distance(x0))
         raise ValueError(f"Omega0 is not in the constraint subspace D (distance {dist:.3g}); "
                          "project it first, e.g. D.project(omega) with D = system.constraints")
     m = model.n

@@ -38,7 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import control
-from .charts import Chart, body_vertical, make_chart
+from .charts import Chart, body_vertical, domain_bound2, make_chart
 from .plan import StagePlan, dense_weights
 
 __all__ = ["RKMKStepper", "Step"]
@@ -147,7 +147,7 @@ class RKMKStepper:
         self._err = [_terms(w, coef) for w in plan.err]
         self._coef = np.array(coef)[:, None]
         self._dense = [j for j in range(S) if np.any(plan.dense[j] != 0.0)]  # stages the extension reads
-        self._exp = chart is not None and chart.name == "exp"
+        self._domain_bound2 = None if chart is None else domain_bound2(chart.name)
 
     # ------------------------------------------------------------------ the field
     def vertical(self, G: np.ndarray | None, gamma: np.ndarray | None) -> np.ndarray | None:
@@ -199,14 +199,14 @@ class RKMKStepper:
         return z
 
     def _check_domain(self, step: Step, t) -> None:
-        """Clear ``step.ok`` where ``|Theta|_F / sqrt 2 >= pi``, for the exponential: a bound on the largest
-        rotation angle (dexp⁻¹ has its first pole at angle 2 pi, and the closed forms lose accuracy past pi)."""
-        if self._exp:
-            ok = self.kern.in_domain(t)
-            if ok is True or ok is False:  # one trajectory (float lanes)
-                step.ok[0] &= ok
-            else:
-                step.ok &= ok
+        """Clear ``step.ok`` where the chart argument is beyond the chart's domain (:func:`.charts.domain_bound2`:
+        for the exponential a rotation angle of pi; for Cayley its numerical limit). A NaN argument is not: the
+        field broke down, and the step's non-finite end says so."""
+        beyond = self.kern.domain_norm2(t) >= self._domain_bound2
+        if beyond is True or beyond is False:  # one trajectory (float lanes)
+            step.ok[0] &= not beyond
+        else:
+            step.ok &= ~beyond
 
     def trial(self, h: np.ndarray, xi: np.ndarray, G, gamma, f0: np.ndarray) -> Step:
         """One trial step of each trajectory; the state is not modified.

@@ -380,9 +380,10 @@ class _Solve:
         good = accepted & finite & step.ok
         sel, n = _where(good)
         if n < np.count_nonzero(accepted):
-            # also a NaN chart argument: the field, not the chart, broke down
-            self._fail(accepted & ~finite, 1, t + h)
-            self._fail(accepted & finite & ~step.ok, 4, t)  # fixed steps (an adaptive one is rejected)
+            # fixed steps (an adaptive one beyond the domain is rejected); the domain first: a step beyond it may
+            # also end non-finite, and that is not the field's fault
+            self._fail(accepted & ~step.ok, 4, t)
+            self._fail(accepted & step.ok & ~finite, 1, t + h)
         if n:
             self._accept(sel, n, step, h[sel], hit[sel], None if norm is None else norm[sel])
 

@@ -178,7 +178,7 @@ def check_lagrange_reduction(system_or_case, Omega0, Gamma0, t_span, g0=None, me
     x0 = system.coordinates(Omega0, "Omega0")
     D = system.constraints
     if not np.all(D.contains(x0, 1e-9)):
-        dist = float(np.max(np.linalg.norm(x0 - D.project(x0), axis=-1)))
+        dist = float(np.max(D.distance(x0)))
         raise ValueError("Omega0 is not in the constraint subspace D (Omega_ij = 0 for i, j <= n-1); "
                          f"distance {dist:.3g}: project it first, D.project(omega) with "
                          "D = system.constraints")

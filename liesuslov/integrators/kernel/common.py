@@ -176,7 +176,8 @@ _dexp3_series = _jit(groups._dexp3_series)
 
 # Layout of the packed integer parameters
 (_I_K, _I_M, _I_Q, _I_MODE, _I_CHART, _I_KIND, _I_SKEW, _I_HASG, _I_S, _I_SS, _I_NE, _I_P, _I_FSAL, _I_NEWIN,
- _I_ADAPT, _I_MAXST, _I_REPROJ, _I_RENORM, _I_NB, _I_NF, _I_NW, _I_NEV, _I_ORDER, _I_RECORD, _I_R, _I_A) = range(26)
-_NHEAD = 26
+ _I_ADAPT, _I_MAXST, _I_REPROJ, _I_RENORM, _I_NB, _I_NF, _I_NW, _I_NEV, _I_ORDER, _I_RECORD, _I_R, _I_A,
+ _I_DOM) = range(27)
+_NHEAD = 27
 _F_T0, _F_T1, _F_H, _F_RTOL, _F_ATOL, _F_EXPO = range(6)
 _FHEAD = 6

@@ -63,8 +63,9 @@ def _omega_alg(family, kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
     scratch row (the other kinds write out directly and leave it alone)."""
 
 
-def _alg_sq(family, kind, Th):
-    """|Theta|_F^2 / 2 (the squared rotation angle on so(3)): the chart-domain test of exp."""
+def _alg_sq(family, kind, Th, dom):
+    """|Theta|_F^2 / 2 of the leading dom x dom block (the squared rotation angle on so(3)): the chart-domain
+    test."""
 
 
 def _alg_dinv(family, kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
@@ -101,10 +102,10 @@ def _omega_by(first_kind, first, other):
 
 
 def _sq_by(first_kind, first, other):
-    def impl(family, kind, Th):
+    def impl(family, kind, Th, dom):
         if kind == first_kind:
-            return first(kind, Th)
-        return other(kind, Th)
+            return first(kind, Th, dom)
+        return other(kind, Th, dom)
     return impl
 
 
@@ -208,7 +209,7 @@ def _omega_none(family, kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
     return nc
 
 
-def _sq_none(family, kind, Th):
+def _sq_none(family, kind, Th, dom):
     return 0.0
 
 
@@ -332,15 +333,19 @@ def _lowrank_omega(kind, skew, x, widx, wval, Om, Q, nc, cvec, out):
 
 # ====================================================================================== |Theta|^2 / 2
 @_jit
-def _so3_sq(kind, Th):
+def _so3_sq(kind, Th, dom):
     return Th[0] * Th[0] + Th[1] * Th[1] + Th[2] * Th[2]
 
 
 @_jit
-def _matrix_sq(kind, Th):
+def _matrix_sq(kind, Th, dom):
+    """Over the leading dom x dom block of the r x r matrix Th holds (flat): all of it but an affine algebra's
+    translations (se(n): dom = r - 1)."""
+    r = int(math.sqrt(Th.shape[0]) + 0.5)
     acc = 0.0
-    for i in range(Th.shape[0]):
-        acc += Th[i] * Th[i]
+    for i in range(dom):
+        for j in range(dom):
+            acc += Th[i * r + j] * Th[i * r + j]
     return 0.5 * acc
 
 

@@ -19,6 +19,7 @@ from .common import (
     _I_A,
     _I_ADAPT,
     _I_CHART,
+    _I_DOM,
     _I_FSAL,
     _I_HASG,
     _I_K,
@@ -64,7 +65,7 @@ from .common import (
     _view,
 )
 from .group import _alg_act, _alg_dinv, _alg_sq, _alg_state, _alg_update, _field, _field_call, _omega_alg
-from .maps import _PI2, _polar_step
+from .maps import _CAYLEY_MAX, _PI2, _polar_step
 
 
 # ====================================================================================== one trajectory
@@ -456,6 +457,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
     record = iprm[_I_RECORD] != 0
     r = iprm[_I_R]
     a = iprm[_I_A]
+    dom = iprm[_I_DOM]
     o = _NHEAD
     fidx = _view(iprm, o, (nf, 3))
     o += 3 * nf
@@ -488,7 +490,9 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
     # np.int64(1), not 1: numba compiles a separate specialisation for a literal argument
     i0 = np.int64(0)
     i1 = np.int64(1)
-    exp_domain = chart == 0 and skew  # the exponential's chart: |Theta| < pi is checked
+    # the chart's domain on |Theta|_F^2 / 2 of the leading dom x dom block (charts.domain_block): the exponential's
+    # pi^2, the Cayley map's numerical limit
+    bound2 = _PI2 if chart == 0 else _CAYLEY_MAX * _CAYLEY_MAX
     # scratch (once per call; each trajectory overwrites what it reads)
     n = m if has_g else 0
     mm = 3 if kind == 1 else (m if kind == 2 else r)
@@ -668,7 +672,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                             for j in range(i):
                                 acc += A[i, j] * hK[j, c]
                             Th[c] = acc
-                        if exp_domain and not extended and _alg_sq(family, kind, Th) >= _PI2:
+                        if not extended and _alg_sq(family, kind, Th, dom) >= bound2:  # (NaN: the field's failure)
                             ok = False
                         if has_g:
                             if extended and i == s:
@@ -702,7 +706,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                         for j in range(s):
                             acc += bw[j] * hK[j, c]
                         Th1[c] = acc
-                    if exp_domain and _alg_sq(family, kind, Th1) >= _PI2:
+                    if _alg_sq(family, kind, Th1, dom) >= bound2:
                         ok = False
                     _alg_update(family, kind, chart, skew, mode, G, Th1, G1, W, vb, Q, nc, r, bufs, PQ, PQ2)
                     for c in range(q):
@@ -717,13 +721,13 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                         rejected_now = True
                         break
                 else:
-                    if not finite:  # the field broke down (a NaN chart argument too)
-                        fail = 1
-                        t_fail = t + h
-                        break
-                    if not ok:
+                    if not ok:  # first: a step beyond the chart's domain may also end non-finite
                         fail = 4
                         t_fail = t
+                        break
+                    if not finite:  # the field broke down
+                        fail = 1
+                        t_fail = t + h
                         break
                 # ------------------------------------------------ accepted: does its interior matter?
                 t_new = t1 if last else t + h

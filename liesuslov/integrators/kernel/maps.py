@@ -22,9 +22,9 @@ def _pade_table() -> tuple[np.ndarray, np.ndarray]:
 
 
 _PADE_THETA, _PADE_COEF = _pade_table()
-# Beyond this |X|_2 bound the Cayley solve gets a polar step; beyond _CAYLEY_MAX it returns NaN (see compiled.py)
+# Beyond this |X|_2 bound the Cayley solve gets a polar step; beyond the chart's domain it returns NaN
 _CAYLEY_POLAR = 2.0
-_CAYLEY_MAX = 6.7e7
+_CAYLEY_MAX = groups._CAYLEY_LIMIT
 _PI2 = math.pi * math.pi
 
 

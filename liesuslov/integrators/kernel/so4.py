@@ -67,7 +67,7 @@ def _so4_omega(skew, x, widx, wval, Om, out):
 
 
 @_jit
-def _so4_sq(kind, Th):
+def _so4_sq(kind, Th, dom):
     """|Theta|_F^2 / 2 = 2 (|p|^2 + |q|^2): what the dense kind computes from the matrix."""
     acc = 0.0
     for i in range(6):

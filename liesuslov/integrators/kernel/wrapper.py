@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from ... import groups
+from ..charts import domain_block
 from ..compiled import (
     CompilePlan,
     NotCompilable,
@@ -158,11 +159,13 @@ def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool, 
         S, s = plan.S, plan.s
         r = S + 1 if kind == "lowrank" else 0
         a = {None: 0, "so3": 3, "so4": 6, "dense": m * m, "lowrank": r * r}[kind]
+        # the block the chart's domain bounds (the matrix kinds; the closed forms take all of theirs)
+        dom = domain_block(problem.model.algebra, m, bool(problem.skew)) if kind == "dense" else r
         head = (k, m, q, mode, CHARTS[problem.chart if mode else None], KINDS[kind], int(problem.skew),
                 int(bool(cplan.has_gamma) and mode != 0), s, S, plan.err.shape[0], plan.dense.shape[1],
                 int(plan.fsal), int(plan.new_in_step), int(problem.adaptive), int(problem.max_steps),
                 int(problem.reproject), max(RENORM_EVERY, m), nb, cplan.field_value.size,
-                cplan.omega_value.size, E, int(plan.order), int(record), r, a)
+                cplan.omega_value.size, E, int(plan.order), int(record), r, a, dom)
         iprm = np.empty(_NHEAD + ints.size + 2 * E, np.int64)
         iprm[:_NHEAD] = head
         iprm[_NHEAD:_NHEAD + ints.size] = ints
