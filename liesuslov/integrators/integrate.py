@@ -127,7 +127,9 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
     first_step : float, optional
         Initial step of adaptive methods (default: Hairer's estimate).
     max_steps : int
-        Per trajectory (accepted and rejected); a trajectory reaching it fails (status -1).
+        Per trajectory (accepted and rejected); a trajectory reaching it fails (status -1). The default 10⁷
+        is seconds on the compiled kernel but can be an hour on the numpy solver (~2500 steps/s for one
+        rkmk853 trajectory on so(3)): lower it for a numpy run that may not converge (a stiff scene).
     progress : bool
         Show a progress bar over the trajectories (needs tqdm): the numpy solver advances it as each
         trajectory ends, the compiled batch at its end.
