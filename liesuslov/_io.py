@@ -9,28 +9,26 @@ into the output folder, for commands that write several files (``liesuslov run``
 from __future__ import annotations
 
 import os
-import tempfile
+import secrets
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
 __all__ = ["atomic_write", "atomic_create", "write_text", "publish"]
 
 
-def _umask_mode() -> int:
-    """0o666 less the process umask: the mode an ordinary ``open(path, "w")`` would give.
-
-    Read from ``/proc/self/status`` where Linux says it: the only portable way, setting the umask and back, leaves
-    it 0 for a moment, in which a file another thread creates gets mode 0o666 (world-writable)."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("Umask:"):
-                    return 0o666 & ~int(line.split()[1], 8)
-    except (OSError, ValueError, IndexError):
-        pass
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
+def _new_file(p: Path) -> tuple[int, str]:
+    """``(fd, name)`` of a new file ``.{stem}-{random}{suffix}`` beside ``p``, open for writing and created
+    exclusively with mode 0o666 less the umask — the mode an ordinary ``open(path, "w")`` gives, applied by the
+    system (``mkstemp`` makes 0o600, and reading the umask means setting it: 0 for a moment, in which a file
+    another thread creates is world-writable)."""
+    flags = os.O_CREAT | os.O_EXCL | os.O_WRONLY | getattr(os, "O_BINARY", 0)
+    for _ in range(100):
+        name = str(p.parent / f".{p.stem}-{secrets.token_hex(6)}{p.suffix}")
+        try:
+            return os.open(name, flags, 0o666), name
+        except FileExistsError:  # (48 random bits: another writer's name, by chance)
+            continue
+    raise FileExistsError(f"no free temporary name beside {p} after 100 tries")
 
 
 def atomic_write(path, write: Callable[[str], object]) -> Path:
@@ -51,11 +49,10 @@ def atomic_write(path, write: Callable[[str], object]) -> Path:
     """
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}-", suffix=p.suffix, dir=p.parent)
+    fd, tmp = _new_file(p)
     os.close(fd)
     try:
-        write(tmp)
-        os.chmod(tmp, _umask_mode())  # mkstemp makes 0o600; the file should look like any other output
+        write(tmp)  # (it truncates the file it opens: the mode given at creation stays)
         os.replace(tmp, p)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -83,11 +80,10 @@ def atomic_create(path, data: bytes) -> Path:
         ``path``.
     """
     p = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}-", suffix=p.suffix, dir=p.parent)
+    fd, tmp = _new_file(p)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
-        os.chmod(tmp, _umask_mode())
         try:
             os.link(tmp, p)
         except FileExistsError:

@@ -932,6 +932,12 @@ def test_membership_of_huge_vectors_is_decided_without_overflow():
     x[1, D6.algebra.index(0, 1)] = 1e199
     assert np.array_equal(D6.contains(x), [True, False, True])
     assert not D.contains([np.inf, 1.0, 0.0]) and not D.contains([np.nan, 1.0, 0.0])
+    D17 = ls.suslov_distribution(17)  # one vector longer than the projector path takes (d = 136)
+    y = np.zeros(D17.algebra.dim)
+    y[D17.algebra.index(0, 16)] = 1e160
+    assert D17.contains(y)
+    y[D17.algebra.index(0, 1)] = 1e160
+    assert not D17.contains(y)
     system = ls.SuslovSystem(ls.Inertia.from_mass_tensor(np.diag([1.0, 2.0, 3.0])))
     with pytest.raises(ValueError, match=r"not in the constraint subspace D \(distance 5e\+159\)"):
         ls.integrate(system, off * 1e160, (0.0, 1e-160), h=1e-161)

@@ -153,6 +153,8 @@ class Subspace:
             out = np.add.reduce(r * r, axis=-1) <= bound * x2 + floor
         huge = x2 == math.inf
         if np.any(huge):
+            if out.ndim == 0:  # one long vector (d above the projector's size)
+                return np.bool_(self._contains_huge(x, tol))
             out[huge] = self._contains_huge(x[huge], tol)
         return out
 

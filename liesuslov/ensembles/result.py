@@ -30,17 +30,17 @@ def _read_shard(path: Path, run: str | None = None):
     shard holds no object arrays. Reading a member lazily (``z[key]``) can fail as well, so the whole ``with``
     body is covered: keep it to reading the shard.
     """
-    other = None
+    other = run
     try:
         with np.load(path, allow_pickle=False) as z:
             other = _shard_run(z) if run is not None else None
-            if other in (None, run):
+            if other == run:
                 yield z
     except (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile) as exc:
         raise ValueError(f"store {str(path.parent)!r}: the shard {path.name} is damaged or not written by ensemble "
                          f"({type(exc).__name__} reading it); delete it (its trajectories then read as missing) "
                          "or run the ensemble again with overwrite=True") from exc
-    if other not in (None, run):
+    if other != run:  # (a chunk file without an id under a manifest with one: an older version wrote it)
         raise ValueError(f"store {str(path.parent)!r}: the shard {path.name} was written by another run than the "
                          "manifest's (two runs wrote this store at once, one of them with overwrite=True): its "
                          "numbers are not this ensemble's; run the ensemble again with overwrite=True")
@@ -88,6 +88,8 @@ class Ensemble:
         interrupted or still going. A finished run's failed chunks (status -1 too) are not missing.
     store : Path or None
     """
+
+    _run = None  # (an Ensemble pickled in memory before stores had run ids has none)
 
     def __init__(self, *, t, batch_shape, bounds, tails, stats, n=None, algebra_name="", message="",
                  arrays=None, status=None, store=None, present=None, traj_stats=None, complete=None,

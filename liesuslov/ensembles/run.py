@@ -255,10 +255,7 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
                                   "events": n_events},
                          "stats": stats, "message": message,
                          "trajectory_stats": {k: v.dtype.str for k, v in collected["traj_stats"].items()}})
-        if _run_on_disk(root) != run_id:  # another run replaced the store (overwrite=True) while this one ran
-            raise RuntimeError(f"store {str(root)!r} was replaced by another run (overwrite=True) while this one ran: "
-                               "this run's chunks there are mixed with that run's; run it again into another "
-                               "directory")
+        _check_still_ours(root, run_id)
         _write_manifest(root, manifest)
         ens = open_ensemble(root)
         ens.message = message
@@ -372,6 +369,7 @@ def _collect(i: int, bound, payload: dict, collected: dict, root: Path | None) -
             if name in collected["ends"]:
                 collected["ends"][name][a:b] = v
     if root is not None:
+        _check_still_ours(root, collected["run"])  # (before writing: a replaced store's chunks stay its new run's)
         _write_shard(root, i, payload, collected["run"])
         return
     collected["events"].append({k: v for k, v in payload.items() if k.startswith(_EVENT)})
@@ -380,6 +378,14 @@ def _collect(i: int, bound, payload: dict, collected: dict, root: Path | None) -
         collected["arrays"] = {k: np.full((T, B) + payload[k].shape[2:], np.nan) for k in _ARRAYS if k in payload}
     for k, arr in collected["arrays"].items():
         arr[:, a:b] = payload[k]
+
+
+def _check_still_ours(root: Path, run: str) -> None:
+    """RuntimeError when another run replaced the store (``overwrite=True``) while this one ran: this run stops
+    before writing into it (each chunk and the final manifest check)."""
+    if _run_on_disk(root) != run:
+        raise RuntimeError(f"store {str(root)!r} was replaced by another run (overwrite=True) while this one ran: "
+                           "this run stopped without writing into it; run it again into another directory")
 
 
 def _fallback_tails(system, init: dict, sampler, options: dict) -> dict[str, tuple[int, ...]]:
@@ -493,9 +499,10 @@ def _prepare_store(store, overwrite: bool) -> Path:
             if not overwrite:
                 raise ValueError(f"store {str(root)!r} already holds an ensemble; pass overwrite=True to replace "
                                  "it, or another directory")
+            # missing_ok: another run replacing the same store may have deleted them first
             for p in [*root.glob("chunk-*.npz"), *root.glob(".chunk-*.npz")]:  # (the latter: cut off mid-write)
-                p.unlink()
-            (root / MANIFEST).unlink()
+                p.unlink(missing_ok=True)
+            (root / MANIFEST).unlink(missing_ok=True)
         root.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise _store_error(root, exc) from exc

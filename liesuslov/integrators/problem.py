@@ -35,7 +35,8 @@ FAILURES = {
     1: "non-finite state",
     2: "step size underflow (the solution is probably singular there, or the tolerances are below rounding)",
     3: "max_steps reached",
-    4: "step beyond the chart's domain (|h Omega| too large for the exponential: lower h)",
+    4: "step beyond the chart's domain (|h Omega| too large: a turn of pi for the exponential, a diverging run for "
+       "the Cayley map; lower h)",
     5: "the fixed step h is below ten ulps of t within t_span (t0 + i h cannot be represented: raise h, or move "
        "t_span nearer 0)",
 }

@@ -179,8 +179,8 @@ class RKMKStepper:
         return np.zeros_like(Z[0]) if acc is None else acc
 
     def _stage(self, step: Step, i: int, vertical: np.ndarray | None = None) -> np.ndarray:
-        """Evaluate stage i >= 1 from the rows above it; returns its argument (k + q, B) and, for the
-        exponential, clears ``step.ok`` where the chart argument is out of the domain. ``vertical`` (B, n), if
+        """Evaluate stage i >= 1 from the rows above it; returns its argument (k + q, B) and clears ``step.ok``
+        where the chart argument is out of the chart's domain. ``vertical`` (B, n), if
         given, is the body vertical the field reads (else ``phi(-Theta_i) Gamma``)."""
         k, kern, ctx = self.k, self.kern, step.ctx
         z = self._sum(step, self._A[i], base=True)

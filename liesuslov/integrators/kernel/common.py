@@ -179,5 +179,5 @@ _dexp3_series = _jit(groups._dexp3_series)
  _I_ADAPT, _I_MAXST, _I_REPROJ, _I_RENORM, _I_NB, _I_NF, _I_NW, _I_NEV, _I_ORDER, _I_RECORD, _I_R, _I_A,
  _I_DOM) = range(27)
 _NHEAD = 27
-_F_T0, _F_T1, _F_H, _F_RTOL, _F_ATOL, _F_EXPO = range(6)
-_FHEAD = 6
+_F_T0, _F_T1, _F_H, _F_RTOL, _F_ATOL, _F_EXPO, _F_DOMAIN = range(7)
+_FHEAD = 7

@@ -10,6 +10,7 @@ import numpy as np
 
 from .common import (
     _F_ATOL,
+    _F_DOMAIN,
     _F_EXPO,
     _F_H,
     _F_RTOL,
@@ -65,7 +66,7 @@ from .common import (
     _view,
 )
 from .group import _alg_act, _alg_dinv, _alg_sq, _alg_state, _alg_update, _field, _field_call, _omega_alg
-from .maps import _CAYLEY_MAX, _PI2, _polar_step
+from .maps import _polar_step
 
 
 # ====================================================================================== one trajectory
@@ -490,9 +491,9 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
     # np.int64(1), not 1: numba compiles a separate specialisation for a literal argument
     i0 = np.int64(0)
     i1 = np.int64(1)
-    # the chart's domain on |Theta|_F^2 / 2 of the leading dom x dom block (charts.domain_block): the exponential's
-    # pi^2, the Cayley map's numerical limit
-    bound2 = _PI2 if chart == 0 else _CAYLEY_MAX * _CAYLEY_MAX
+    # the chart's domain, a bound on |Theta|_F^2 / 2 of the leading dom x dom block (charts.domain_bound2 / 2,
+    # charts.domain_block)
+    bound2 = fprm[_F_DOMAIN]
     # scratch (once per call; each trajectory overwrites what it reads)
     n = m if has_g else 0
     mm = 3 if kind == 1 else (m if kind == 2 else r)

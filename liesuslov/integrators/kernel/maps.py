@@ -25,7 +25,6 @@ _PADE_THETA, _PADE_COEF = _pade_table()
 # Beyond this |X|_2 bound the Cayley solve gets a polar step; beyond the chart's domain it returns NaN
 _CAYLEY_POLAR = 2.0
 _CAYLEY_MAX = groups._CAYLEY_LIMIT
-_PI2 = math.pi * math.pi
 
 
 @_jit

@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 
 from ... import groups
-from ..charts import domain_block
+from ..charts import domain_block, domain_bound2
 from ..compiled import (
     CompilePlan,
     NotCompilable,
@@ -174,8 +174,10 @@ def _pack(problem: Problem, kind: str | None, cplan: CompilePlan, record: bool, 
                                                          np.asarray(problem.event_direction).reshape(E)])
         cache[key] = iprm
     fprm = floats.copy()
+    # the chart's domain as the kernel tests it, on |Theta|_F^2 / 2 (no group part: never tested)
+    domain = 0.5 * domain_bound2(problem.chart) if problem.mode != "none" else np.inf
     fprm[:_FHEAD] = (problem.t0, problem.t1, abs(float(problem.h)), problem.rtol, problem.atol,
-                     plan.error_exponent)
+                     plan.error_exponent, domain)
     return iprm, fprm
 
 
