@@ -190,17 +190,46 @@ def test_target_summary_from_measurements():
             {"target": "f", "import_s": 0.2, "import_runs": 1, "compile_status": "not measured (--quick)"}]
     scaling = [{"n": n, "chart": "exp", "requested": "numba", "status": "ok", "us_per_step": n ** 2 / 100}
                for n in (64, 128, 256)]
-    ratios = [{"scene": "s", "level": 1e-6, "ratio_dop853": 0.05}, {"scene": "s", "level": 1e-7, "ratio_dop853": 0.2}]
+    ratios = [{"scene": "s", "level": 1e-6, "ratio_dop853": 0.05, "ratio_adaptive": 0.12, "adaptive_route": "r853"},
+              {"scene": "s", "level": 1e-7, "ratio_dop853": 0.2, "ratio_adaptive": 0.3, "adaptive_route": "r45"}]
     summary = targets.summary(rows, bench.metrics.fit_exponent(scaling), scaling, ratios)
     by = {t["target"]: t for t in summary}
     assert by["a (n = 3)"]["met"] and not by["a (n = 4)"]["met"] and by["b"]["met"] and by["c"]["met"]
     assert by["d"]["value"] == pytest.approx(2.0) and by["d"]["met"]
     assert by["e"]["value"] == 0.2 and not by["e"]["met"]
+    # the fastest routes may be fixed-step ones: the detail says what adaptive routes alone reach
+    assert "adaptive routes only (rtol sweeps, as scipy's): worst 0.300 at s 1e-07 (r45)" in by["e"]["detail"]
+    assert "slope between the two largest 2.00" in by["d"]["detail"] and "met when ≤ 2.3" in by["d"]["detail"]
     assert by["f (import)"]["met"] and by["f (compile)"]["met"] is None
     # a target without a value says why (the console prints it), a measured one says nothing
     assert by["f (compile)"]["why"] == "not measured (--quick)" and by["a (n = 3)"]["why"] == ""
     text = bench.tables.targets_section(bench.BenchReport(targets=rows, target_summary=summary))
     assert "## Targets" in text and "max |floor − library| = 1.0e-15" in text
+
+
+def test_floor_runs_the_librarys_so4_dexpinv():
+    """The n = 4 floor ran the closed-form so(3) dexp⁻¹ on each factor where the library's so(4) kind runs the
+    series to ad² (an audit: 1.84 -> 2.22 of the floor). At h = 0.005 the two differ below the agreement tolerance,
+    so the check here takes big steps, where the truncation shows."""
+    pytest.importorskip("numba")
+    from liesuslov.bench import floor
+    from liesuslov.bench.scenes import floor_klebsh_tisserand
+
+    sc = floor_klebsh_tisserand()
+    h, steps = 0.4, 10
+    sol = ls.integrate(sc.system, sc.Omega0, (0.0, h * steps), Gamma0=sc.Gamma0, reconstruct=True, method="rkmk4",
+                       h=h, t_eval=[h * steps], backend="numba")
+    gaps = {}
+    for exact in (False, True):
+        x, g = np.array(sc.x0, dtype=float), np.eye(4)
+        floor.kt4_steps(x, g, np.array(sc.Gamma0, dtype=float), sc.coeffs, h, steps, exact)
+        gaps[exact] = max(np.abs(x - sc.vector(sol.Omega[-1])).max(), np.abs(g - sol.g[-1]).max())
+    assert gaps[False] < 1e-13 < 1e3 * gaps[False] < gaps[True]
+    # and target (a)'s floor is that one
+    x, g = np.array(sc.x0, dtype=float), np.eye(4)
+    floor.kt4_steps(x, g, np.array(sc.Gamma0, dtype=float), sc.coeffs, targets.FLOOR_H, 50, False)
+    fx, fg = targets._floor_run(4, sc.x0, sc.coeffs, sc.Gamma0, 50)
+    assert np.array_equal(fx, x) and np.array_equal(fg, g)
 
 
 @pytest.mark.parametrize("n", [3, 4])

@@ -44,9 +44,9 @@ FIXED_FACTORS: dict[str, tuple[float, ...]] = {
 TOLERANCES: dict[str, tuple[float, ...]] = {
     "rkmk23": tuple(10.0 ** -k for k in range(3, 9)),
     "rkmk45": tuple(10.0 ** -k for k in range(3, 12)),
-    "rkmk853": tuple(10.0 ** -k for k in range(4, 13)),
+    "rkmk853": tuple(10.0 ** -k for k in range(2, 13)),
     "RK45": tuple(10.0 ** -k for k in range(3, 12)),
-    "DOP853": tuple(10.0 ** -k for k in range(4, 13)),
+    "DOP853": tuple(10.0 ** -k for k in range(2, 13)),
     "Radau": tuple(10.0 ** -k for k in range(3, 10)),
 }
 

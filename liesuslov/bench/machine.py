@@ -67,4 +67,5 @@ def machine_info() -> dict:
             "python": platform.python_version(), "numpy": np.__version__, "scipy": _version("scipy"),
             "numba": _importable_version("numba"), "liesuslov": getattr(ls, "__version__", "?"),
             "commit": commit or "unknown",
+            "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "not set (the library's default)"),
             "date": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}

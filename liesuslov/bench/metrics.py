@@ -120,10 +120,14 @@ def ratio_table(rows: list[dict], scenes: Sequence[str], levels: Sequence[float]
             lt, lr = _fastest([r for r in srows if r["library"] == "liesuslov"], level)
             st, sr = _fastest([r for r in srows if r["library"] == "scipy"], level)
             dt, _ = _fastest([r for r in srows if r["route"] == "scipy DOP853"], level)
+            # adaptive against adaptive: liesuslov's rtol sweeps only (no route whose step was chosen for the scene)
+            at, ar = _fastest([r for r in srows if r["library"] == "liesuslov" and r["setting_kind"] == "rtol"], level)
             ratio = lt / st if np.isfinite(lt) and np.isfinite(st) else float("nan")
             out.append({"scene": s, "level": level, "liesuslov_time": lt, "liesuslov_route": lr,
                         "scipy_time": st, "scipy_route": sr, "ratio": ratio, "dop853_time": dt,
                         "ratio_dop853": lt / dt if np.isfinite(lt) and np.isfinite(dt) else float("nan"),
+                        "adaptive_route": ar,
+                        "ratio_adaptive": at / dt if np.isfinite(at) and np.isfinite(dt) else float("nan"),
                         "goal_met": bool(np.isfinite(ratio) and ratio <= GOAL_RATIO),
                         "reliable": bool(level >= 10 * unc)})
     return out
@@ -147,5 +151,7 @@ def fit_exponent(rows: list[dict]) -> dict:
             x = np.log([r["n"] for r in use])
             y = np.log([r["us_per_step"] for r in use])
             out[key] = {"exponent": float(np.polyfit(x, y, 1)[0]),
-                        "sizes": f"{min(r['n'] for r in use)}..{max(r['n'] for r in use)}"}
+                        "sizes": f"{min(r['n'] for r in use)}..{max(r['n'] for r in use)}",
+                        # the slope between the two largest sizes (the growth still rising there shows)
+                        "last_slope": float((y[-1] - y[-2]) / (x[-1] - x[-2]))}
     return out

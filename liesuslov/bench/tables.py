@@ -73,7 +73,7 @@ def summary_sections(report: BenchReport, config: BenchConfig, image_dir: str | 
     sec.append("## Machine\n\n" + md_table(["", ""], [
         ["CPU", m["cpu"]], ["cores", m["cores"]], ["platform", m["platform"]], ["Python", m["python"]],
         ["numpy", m["numpy"]], ["scipy", m["scipy"]], ["numba", m["numba"]], ["liesuslov", m["liesuslov"]],
-        ["commit", m["commit"]], ["date", m["date"]],
+        ["commit", m["commit"]], ["date", m["date"]], ["OPENBLAS_NUM_THREADS", m.get("blas_threads", "?")],
         ["mode", f"{config.preset}, backend asked: {config.backend or 'the default (auto)'}, "
                  f"{report.elapsed:.0f} s in all"],
         ["backends seen", ", ".join(sorted({str(r.get('backend')) for r in report.rows
@@ -186,7 +186,8 @@ def targets_section(report: BenchReport) -> str:
              for r in checks]
     return ("## Targets\n\nThe targets of the compiled time loop (issue 10), as ratios: to the *floor* — a plain "
             "compiled loop of the same method (`liesuslov/bench/floor.py`: RKMK4, exponential chart, Rodrigues, "
-            "closed-form dexp⁻¹, h = 0.005, no allocation per step) — or to the same run without output. "
+            "the library's dexp⁻¹ — closed form on so(3), the series to ad² on each so(3) factor of so(4) —, "
+            "h = 0.005, no allocation per step) — or to the same run without output. "
             "✓ met, ✗ not met.\n\n"
             + md_table(["target", "what", "measured", "goal", "", "detail"], body)
             + ("\n\nThe floor computes what the library computes (same field, same method, same initial data):\n\n"
@@ -228,8 +229,8 @@ side written by hand for each scene, as a user would.
 **Timing.** Wall time of the whole call (`ls.integrate` or `solve_ivp`), the minimum over repeats
 after one warm-up run (repeats stop once they add up to 0.6 s, at least one); as in `timeit`, one
 garbage collection before the repeats and none during them. BLAS threads as the environment sets them
-(the numbers below were taken with `OPENBLAS_NUM_THREADS=1`: on a loaded 2-core machine a threaded BLAS
-makes small products erratic for both libraries).
+(the machine table says what `OPENBLAS_NUM_THREADS` was: 1 is advised, since on a loaded 2-core machine a
+threaded BLAS makes small products erratic for both libraries).
 
 **Errors.** At the final time t1, where both libraries land exactly: the largest absolute component
 error of Ω (so(n) coordinates), of Γ, of g, and of the pendulum's (q, v); a run's *error* is the largest
@@ -247,7 +248,8 @@ one-off kernel compilation).
 
 **Targets and the floor.** The targets of the compiled time loop are reported as ratios, which drift
 less than times on a shared machine. The *floor* is a plain compiled loop (numba) of the method the
-library runs — RKMK4 in the exponential chart with Rodrigues' formula and the closed-form dexp⁻¹, the
+library runs — RKMK4 in the exponential chart with Rodrigues' formula and the library's dexp⁻¹ (the
+closed form on so(3); on so(4) the series to ad² on each so(3) factor, as the library's so(4) kind), the
 free rigid body in SO(3) and the Klebsh–Tisserand body in SO(4) (so(4) = so(3) ⊕ so(3) by quaternions),
 h = 0.005, one scalar loop without allocation — checked against the library's result (to 1e-12) in
 every run. Library and floor are timed in alternating rounds (up to 15, the fastest of each), so that a

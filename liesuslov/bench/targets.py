@@ -44,6 +44,8 @@ MEASURE_BUDGET_S = 5.0
 DENSE_POINTS, DENSE_T1 = 500, 50.0
 #: The goals, as the table states them.
 GOALS = {"a": 3.0, "b": 1.0, "c": 1.2, "d": 2.0, "e": 0.1, "f-import": 0.3, "f-compile": 10.0}
+#: Target (d) is met up to this far above n² (the measured exponent drifts with the machine's caches; n³ is far)
+D_MARGIN = 0.3
 
 
 def have_floor() -> bool:
@@ -64,7 +66,8 @@ def _floor_run(n: int, x0: np.ndarray, coeffs: np.ndarray, Gamma0, steps: int):
     if n == 3:
         floor.free3_steps(x, g, coeffs, FLOOR_H, steps)
     else:
-        floor.kt4_steps(x, g, np.array(Gamma0, dtype=float), coeffs, FLOOR_H, steps, True)
+        # the library's so(4) kind: the so(3) dexp⁻¹ series to ad² on each factor (not the closed form)
+        floor.kt4_steps(x, g, np.array(Gamma0, dtype=float), coeffs, FLOOR_H, steps, False)
     return x, g
 
 
@@ -297,8 +300,9 @@ def summary(target_rows: list[dict], scaling_exponent: dict, scaling: list[dict]
     reached = nmax is not None and nmax >= 256
     add("d", "Fedorov–Kozlov + g, backend numba, to n = 256: exponent of the cost per step",
         fit["exponent"] if fit else math.nan, GOALS["d"],
-        (f"fit over n = {fit['sizes']}; " if fit else "no fit; ") + f"largest n on numba: {nmax or '—'}",
-        met=bool(reached and fit["exponent"] <= GOALS["d"] + 0.3) if fit else None,
+        (f"fit over n = {fit['sizes']}, slope between the two largest {fit['last_slope']:.2f}; " if fit else
+         "no fit; ") + f"largest n on numba: {nmax or '—'}; met when ≤ {GOALS['d'] + D_MARGIN:g} (n², not n³)",
+        met=bool(reached and fit["exponent"] <= GOALS["d"] + D_MARGIN) if fit else None,
         why=("numba is not installed" if not have_floor() else
              "fewer than two sizes ran on numba" if any(x.get("requested") == "numba" for x in scaling) else
              "the n-sweep ran on numpy only (--quick or --backend numpy)"))
@@ -307,7 +311,8 @@ def summary(target_rows: list[dict], scaling_exponent: dict, scaling: list[dict]
     add("e", "work-precision: fastest liesuslov / scipy DOP853 at equal error, worst of 1e-5 … 1e-10",
         worst["ratio_dop853"] if worst else math.nan, GOALS["e"],
         (f"worst at {worst['scene']} {worst['level']:.0e}; best "
-         f"{min(x['ratio_dop853'] for x in finite):.3f}" if worst else "no level reached by both"),
+         f"{min(x['ratio_dop853'] for x in finite):.3f}" + _adaptive_only(ratios) if worst else
+         "no level reached by both"),
         why="no error level reached by both liesuslov and scipy")
     r = by.get(("f", None), {})
     add("f (import)", "`import liesuslov` in a fresh process (s)", r.get("import_s", math.nan), GOALS["f-import"],
@@ -317,6 +322,17 @@ def summary(target_rows: list[dict], scaling_exponent: dict, scaling: list[dict]
         f"then {_num(r.get('first_call_cached_s'))} s in the next process (cache on disk); "
         f"{r.get('compile_status', '')}", why=r.get("compile_status") or _why(r))
     return out
+
+
+def _adaptive_only(ratios: list[dict]) -> str:
+    """Target (e) for liesuslov's adaptive routes alone (the fastest routes are often fixed-step ones, whose step
+    sweep is set per scene): the worst ratio to scipy's DOP853 and where."""
+    finite = [x for x in ratios if np.isfinite(x.get("ratio_adaptive", math.nan))]
+    if not finite:
+        return ""
+    w = max(finite, key=lambda x: x["ratio_adaptive"])
+    return (f"; adaptive routes only (rtol sweeps, as scipy's): worst {w['ratio_adaptive']:.3f} at {w['scene']} "
+            f"{w['level']:.0e} ({w['adaptive_route']})")
 
 
 def _num(x, spec: str = ".4g") -> str:
