@@ -388,20 +388,24 @@ def _mat_dinv(chart, skew, Th, A, out, W, bern):
             _axpy(out, -c if kk == 1 else c, ad)
         return
     M, P = W[0], W[1]
-    _mm(Th, A, P)
     if skew:
-        # Th, A skew: P^T = A Th and P Th = Th A Th is skew, so the result is A + (P - P^T)/2 - (P Th)/4,
-        # skew by construction: its upper triangle only (n^2 (n - 1)/2 products instead of a second n^3)
+        # Th, A skew: with P = Th A, P^T = A Th and P Th = Th A Th is skew, so the result is
+        # A + (P - P^T)/2 - (P Th)/4, skew by construction: its upper triangle only (n^2 (n - 1)/2 products
+        # instead of a second n^3). Pt = A Th is formed, not P: _mm skips A's zero entries (Omega of a
+        # Fedorov–Kozlov model has 2(n - 1) of n^2), and its products and their order are P's (bitwise).
+        Pt = P
+        _mm(A, Th, Pt)
         for i in range(n):
             out[i, i] = 0.0
             for j in range(i + 1, n):
                 acc = 0.0
                 for p in range(n):
-                    acc += P[i, p] * Th[p, j]
-                v = A[i, j] + 0.5 * (P[i, j] - P[j, i]) - 0.25 * acc
+                    acc += Pt[p, i] * Th[p, j]
+                v = A[i, j] + 0.5 * (Pt[j, i] - Pt[i, j]) - 0.25 * acc
                 out[i, j] = v
                 out[j, i] = -v
         return
+    _mm(Th, A, P)
     for i in range(n):
         for j in range(n):
             M[i, j] = A[i, j] + 0.5 * P[i, j]
