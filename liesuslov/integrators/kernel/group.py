@@ -434,11 +434,11 @@ def _so3_dinv(chart, Th, Om, h, out, row):
 def _dense_dinv(kind, chart, skew, Th, Om, h, out, row, Wf, bern, nc, r, bufs):
     n = int(math.sqrt(Th.shape[0]) + 0.5)
     W = _view(Wf, 0, (12, n, n))
-    Rm = _view(bufs, 2 * bufs.shape[1], (n, n))
+    Rm = _view(out, row * out.shape[1], (n, n))  # the stage's row of out, as the n x n matrix it holds
     _mat_dinv(chart, skew, _view(Th, 0, (n, n)), _view(Om, 0, (n, n)), Rm, W, bern)
     for i in range(n):
         for j in range(n):
-            out[row, i * n + j] = h * Rm[i, j]
+            Rm[i, j] *= h
 
 
 @_jit
