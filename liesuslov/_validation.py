@@ -40,18 +40,25 @@ def as_float_array(x: Any, name: str, *, ndim_min: int = 0, tail: tuple[int, ...
     if x is None:  # np.asarray(None, dtype=float) would be a silent NaN
         raise TypeError(f"{name} must be a real numeric array, got None")
     if not (isinstance(x, np.ndarray) and x.dtype.kind in "iuf"):  # (the common case, checked cheaply)
+        given = x
         try:
             x = np.asarray(x)  # its own dtype first: what float conversion would hide
         except ValueError as exc:  # nested sequences of unequal lengths
             raise ValueError(f"{name} must be a rectangular array (nested sequences of equal lengths), got a "
                              f"ragged {type(x).__name__}") from exc
         kind = x.dtype.kind
-        # float(complex) would drop the imaginary part with only a warning: a complex value is a wrong type
-        if kind == "c" or (kind == "O" and _has_complex(x.ravel().tolist())):
+        # float(complex) would drop the imaginary part with only a warning, float("0.3") and float(True) would
+        # read them: each is a wrong type. numpy hides them in a number dtype ([True, 1.0] is float64) or an
+        # object one: the given sequence is searched then.
+        what = {"c": "complex values", "b": "booleans", "U": "strings", "S": "strings"}.get(kind)
+        if what is None and kind == "O":
+            what = _foreign_scalars(x.ravel().tolist())
+        elif what is None and isinstance(given, (list, tuple)):
+            what = _foreign_scalars(given)
+        if what == "complex values":
             raise TypeError(f"{name} must be real, got complex values; pass the real part explicitly "
                             f"(np.real({name})) if the imaginary part is rounding noise")
-        if kind in "bUS":  # float("0.3") and float(True) would read them
-            what = "booleans" if kind == "b" else "strings"
+        if what is not None:
             raise TypeError(f"{name} must be a real numeric array, got {what}; pass numbers")
     try:
         arr = np.asarray(x, dtype=float)
@@ -96,10 +103,26 @@ def all_finite(arr: np.ndarray) -> bool:
     return bool(np.logical_and.reduce(np.isfinite(arr), axis=None))
 
 
-def _has_complex(x: Any) -> bool:
-    """True iff a (nested) list or tuple holds a complex number or complex array."""
-    return any(_has_complex(e) if isinstance(e, (list, tuple)) else
-               (isinstance(e, complex) or np.iscomplexobj(e)) for e in x)
+def _foreign_scalars(x: Any) -> str | None:
+    """What a (nested) list or tuple holds that is not a real number — "complex values", "booleans" or
+    "strings" (also inside arrays among its entries) — or None."""
+    for e in x:
+        if isinstance(e, (list, tuple)):
+            what = _foreign_scalars(e)
+        elif isinstance(e, (bool, np.bool_)):
+            what = "booleans"
+        elif isinstance(e, (str, bytes)):
+            what = "strings"
+        elif isinstance(e, complex) or np.iscomplexobj(e):
+            what = "complex values"
+        elif isinstance(e, np.ndarray) and e.dtype.kind in "bUSO":
+            what = _foreign_scalars(e.ravel().tolist()) if e.dtype.kind == "O" else (
+                "booleans" if e.dtype.kind == "b" else "strings")
+        else:
+            what = None
+        if what is not None:
+            return what
+    return None
 
 
 def check_real(x: Any, name: str) -> float:
