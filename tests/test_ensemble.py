@@ -173,10 +173,11 @@ def pool():
 
 
 @pytest.mark.parametrize("chunk_size", [3, 11])
-def test_process_pool_equals_one_integrate_call(pool, chunk_size):
+@pytest.mark.parametrize("opts", [FIXED, ADAPTIVE], ids=["fixed", "adaptive"])
+def test_process_pool_equals_one_integrate_call(pool, chunk_size, opts):
     system, Omega0, Gamma0 = _initial()
-    sol = ls.integrate(system, Omega0, T_SPAN, Gamma0=Gamma0, t_eval=[0.0, 1.5], **FIXED)
-    ens = ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, chunk_size=chunk_size, executor=pool, **FIXED)
+    sol = ls.integrate(system, Omega0, T_SPAN, Gamma0=Gamma0, t_eval=[0.0, 1.5], **opts)
+    ens = ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, chunk_size=chunk_size, executor=pool, **opts)
     _assert_same(ens, sol)
     assert ens.stats["executor"] == "ProcessPoolExecutor"
 
