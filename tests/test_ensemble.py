@@ -968,3 +968,18 @@ def test_good_seeds_still_work():
     b = draw(uniform_sampler, 5, np.random.SeedSequence([1, 2]))
     assert np.array_equal(a["Omega0"], b["Omega0"])
     assert np.array_equal(draw(uniform_sampler, 5, np.int64(3))["Omega0"], draw(uniform_sampler, 5, 3)["Omega0"])
+
+
+def test_backward_events_come_in_the_order_of_integration(tmp_path):
+    """A backward run's crossings come in decreasing t per trajectory, as integrate gives them (the ensemble
+    sorted them by increasing t: a mutation audit)."""
+    system, Omega0, Gamma0 = _initial((6,))
+    span = (20.0, 0.0)
+    plane = ls.integrators.gamma_crossing(3, index=0)
+    sol = ls.integrate(system, Omega0, span, Gamma0=Gamma0, events=plane, **FIXED)
+    rec = sol.events[0]
+    assert rec.t.size > 6 and np.all(np.diff(rec.t)[np.diff(rec.index) == 0] < 0)
+    for ens in (ensemble(system, Omega0, span, Gamma0=Gamma0, chunk_size=2, events=plane, **FIXED),
+                ensemble(system, Omega0, span, Gamma0=Gamma0, chunk_size=4, store=tmp_path / "s", events=plane,
+                         **FIXED)):
+        assert np.array_equal(ens.events[0].t, rec.t) and np.array_equal(ens.events[0].index, rec.index)

@@ -628,6 +628,9 @@ def test_lyapunov_is_shift_invariant_and_refuses_rounding_level_settings():
     assert ls.lyapunov_exponent(heavy, x0, (1e10, 1e10 + 20.0), Gamma0=G0, seed=0) == lam
     with pytest.raises(ValueError, match="within the rounding of the state"):
         ls.lyapunov_exponent(heavy, x0, (0.0, 20.0), Gamma0=G0, seed=0, delta=1e-14)
+    for big in (0.5, 1e-2):  # a companion that far is not a tangent vector (0.5 moved a free body's exponent 10 %)
+        with pytest.raises(ValueError, match="delta must be small"):
+            ls.lyapunov_exponent(heavy, x0, (0.0, 20.0), Gamma0=G0, seed=0, delta=big)
     with pytest.raises(ValueError, match="t_span is too short"):
         ls.lyapunov_exponent(heavy, x0, (0.0, 1e-300), Gamma0=G0, seed=0)
     assert np.isfinite(ls.lyapunov_exponent(heavy, x0, (0.0, 20.0), Gamma0=G0,

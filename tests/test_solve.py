@@ -772,3 +772,90 @@ def test_options_are_checked_whether_or_not_the_method_reads_them():
         ls.integrate(system, w, (0.0, 1.0), method="rkmk45", events=ev)
     with pytest.raises(TypeError, match="not a boolean"):
         ls.integrate(system, w, (0.0, 1.0), method="rkmk45", events=lambda t, O, G, g: t > 0.5)
+
+
+# ------------------------------------------------------------------------- found by a mutation audit of the suite
+def test_return_plane_is_normal_to_the_reduced_velocity():
+    """The plane through the initial state has the reduced velocity there as its unit normal (dGamma/dt =
+    -Omega Gamma included), so the flow leaves it upward at t0 — checked against a finite difference."""
+    system, Omega0, Gamma0 = kt_body()
+    plane = return_plane(system, Omega0, Gamma0)
+    dt = 1e-6
+    sol = ls.integrate(system, Omega0, (0.0, dt), Gamma0=Gamma0, method="rkmk853", rtol=1e-13, atol=1e-15,
+                       t_eval=[0.0, dt])
+    v = np.concatenate([sol.omega[1] - sol.omega[0], sol.Gamma[1] - sol.Gamma[0]]) / dt
+    normal = np.concatenate([plane.omega, plane.Gamma])
+    assert abs(np.linalg.norm(normal) - 1.0) < 1e-14
+    assert abs(normal @ v / np.linalg.norm(v) - 1.0) < 1e-5
+    assert abs(normal @ np.concatenate([sol.omega[0], sol.Gamma[0]]) - plane.offset) < 1e-14
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_reproject_false_is_honoured(backend):
+    """Re-orthonormalising moves the state, so an FSAL method evaluates stage 0 again there: rkmk5 over 200
+    steps takes 1 + 6 * 200 evaluations without it and 3 more with it (every 64 steps) — on both backends."""
+    system, Omega0, Gamma0 = kt_body()
+    nfev = {flag: ls.integrate(system, Omega0, (0.0, 2.0), Gamma0=Gamma0, reconstruct=True, method="rkmk5", h=0.01,
+                               t_eval=[2.0], reproject=flag, backend=backend).stats["nfev"] for flag in (False, True)}
+    assert nfev == {False: 1201, True: 1204}
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_max_steps_counts_rejected_steps(backend):
+    """max_steps bounds accepted + rejected steps, on both backends alike."""
+    system, Omega0, Gamma0 = kt_body()
+    sol = ls.integrate(system, 10 * Omega0, (0.0, 50.0), Gamma0=Gamma0, method="rkmk45", rtol=1e-10, atol=1e-12,
+                       first_step=5.0, max_steps=40, t_eval=[50.0], backend=backend)
+    assert sol.status == -1 and "max_steps" in sol.message
+    assert sol.stats["rejected"] > 0 and sol.stats["steps"] + sol.stats["rejected"] == 40
+
+
+def test_small_distances_from_D_and_bad_counts_are_refused():
+    """Omega0 1e-6 off the constraint subspace is refused (not projected); max_steps=0 and repeated output
+    times are refused; a batch of g0 with one reflection among rotations is refused."""
+    system, Omega0, Gamma0 = kt_body()
+    off = Omega0.copy()
+    off[0, 1], off[1, 0] = 1e-6, -1e-6  # Fedorov–Kozlov: Omega_01 = 0 in D
+    with pytest.raises(ValueError, match="not in the constraint subspace"):
+        ls.integrate(system, off, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45")
+    with pytest.raises(ValueError, match="max_steps"):
+        ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", max_steps=0)
+    with pytest.raises(ValueError, match="t_eval must be strictly increasing"):
+        ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", t_eval=[0.0, 0.5, 0.5, 1.0])
+    g0 = np.stack([np.eye(4), np.diag([1.0, 1.0, 1.0, -1.0]), np.eye(4)])
+    with pytest.raises(ValueError, match="g0"):
+        ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", reconstruct=True, g0=g0)
+
+
+def test_run_message_names_the_first_failure():
+    from liesuslov.integrators.problem import run_message
+
+    msg = run_message(np.array([0, -1, 1, -1]), np.array([1.0, 0.25, 0.5, 0.75]), np.array([0, 1, 0, 3]))
+    assert msg.startswith("2 of 4 trajectories failed; the first (index 1)") and "t = 0.25" in msg
+
+
+def test_numpy_renormalises_gamma_to_unit_length():
+    """The numpy solver's re-projection of Gamma is Gamma / |Gamma| (also far from the sphere)."""
+    from types import SimpleNamespace
+
+    from liesuslov.integrators.problem import Problem
+
+    G = np.array([[0.0, 3.0, 4.0], [1.1, 0.0, 0.0]])
+    out = Problem.reprojected(SimpleNamespace(mode="gamma", skew=True), G)
+    assert np.allclose(out, [[0.0, 0.6, 0.8], [1.0, 0.0, 0.0]], rtol=0, atol=1e-15)
+
+
+def test_output_time_at_a_terminal_event_is_the_state_there():
+    """On numpy (a user callable): an output time exactly at a terminal event's time reports the state, as
+    scipy does; the ones after it are NaN."""
+    system = free_body()
+
+    def at_125(t, Omega, Gamma, g):
+        return t - 1.25
+
+    at_125.terminal = True
+    sol = ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 2.0), method="rkmk45", events=at_125,
+                       t_eval=[0.5, 1.25, 1.5])
+    assert sol.stats["backend"] == "numpy" and sol.status == 1 and sol.events[0].t.tolist() == [1.25]
+    assert np.all(np.isfinite(sol.omega[1])) and np.all(np.isnan(sol.omega[2]))
+    assert np.allclose(sol.omega[1], sol.events[0].omega[0], rtol=0, atol=1e-12)
