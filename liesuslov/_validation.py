@@ -260,7 +260,8 @@ def check_t_span(t_span) -> tuple[float, float]:
             pair = tuple(t_span)
         except TypeError as exc:
             raise ValueError(bad()) from exc
-        if any(isinstance(v, (str, bytes, bool, np.bool_)) for v in pair):  # a bool would be read as 0 or 1
+        # a bool would be read as 0 or 1; float() refuses a complex number with a TypeError, kept a TypeError
+        if any(isinstance(v, (str, bytes, bool, np.bool_, complex, np.complexfloating)) for v in pair):
             raise TypeError(bad())
         try:
             t0, t1 = (float(v) for v in pair)

@@ -90,10 +90,7 @@ def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="DIR", default=None,
                      help="output folder (default: the scene's [output].dir, else liesuslov-out)")
     run.add_argument("--no-figures", action="store_true", help="do not draw figures")
-    run.add_argument("--progress", action="store_true", help="show a progress bar (needs tqdm)")
-    run.add_argument("--t-end", type=float, metavar="T", default=None, help="integrate up to t = T instead")
-    run.add_argument("--backend", default=None, metavar="NAME",
-                     help="integrate(backend=...): auto, numpy or numba (default: the scene's, else auto)")
+    _add_integrate_options(run)
     run.add_argument("--print-default", action="store_true",
                      help="print the built-in scene as TOML (a template for your own) and exit")
     run.set_defaults(func=_cmd_run)
@@ -113,10 +110,7 @@ def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
     check.add_argument("--tol", type=float, default=None,
                        help="tolerance (default: the scene's [check].tol, else 1e-8); drifts of integrals are "
                             "compared with tol * max(1, |F(0)|)")
-    check.add_argument("--t-end", type=float, metavar="T", default=None, help="integrate up to t = T instead")
-    check.add_argument("--progress", action="store_true", help="show a progress bar (needs tqdm)")
-    check.add_argument("--backend", default=None, metavar="NAME",
-                       help="integrate(backend=...): auto, numpy or numba (default: the scene's, else auto)")
+    _add_integrate_options(check)
     check.set_defaults(func=_cmd_check)
 
     ens = sub.add_parser("ensemble", help="integrate N perturbed copies of a scene's initial state (ls.ensemble)",
@@ -141,10 +135,7 @@ def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
     ens.add_argument("--executor", choices=("auto", "dask", "process"), default="auto",
                      help="with W >= 1: dask (LocalCluster), process (ProcessPoolExecutor) or auto (dask if "
                           "installed)")
-    ens.add_argument("--t-end", type=float, metavar="T", default=None, help="integrate up to t = T instead")
-    ens.add_argument("--progress", action="store_true", help="show a progress bar (needs tqdm)")
-    ens.add_argument("--backend", default=None, metavar="NAME",
-                     help="integrate(backend=...): auto, numpy or numba (default: the scene's, else auto)")
+    _add_integrate_options(ens)
     ens.set_defaults(func=_cmd_ensemble)
 
     section = sub.add_parser("section", help="Poincaré section of a scene (crossings, integrals, figure)",
@@ -213,8 +204,8 @@ def _cmd_run(args) -> int:
             raise _UserError("--print-default prints the built-in scene; it takes no scene file")
         sys.stdout.write(DEFAULT_SCENE)
         return 0
-    scene = _load(args.scene, t_end=args.t_end, progress=args.progress or None, backend=args.backend,
-                  out_dir=args.out, figures=False if args.no_figures else None)
+    scene = _load(args.scene, progress=args.progress or None, out_dir=args.out,
+                  figures=False if args.no_figures else None, **_integrate_overrides(args))
     out = Path(scene.out_dir)
     _probe_out_dir(out)
     result = _integrate_and_report(scene, tol=None, failed_note=" (nothing written)")
@@ -240,6 +231,22 @@ def _probe_out_dir(out: Path) -> None:
                          "(or [output].dir) with a folder you can write") from exc
     # only the folder itself: parents it made stay (harmless, and removing them could race with another run)
     out.rmdir()
+
+
+def _add_integrate_options(parser) -> None:
+    """The options of run, check and ensemble that override the scene's ``[integrate]`` table."""
+    parser.add_argument("--t-end", type=float, metavar="T", default=None, help="integrate up to t = T instead")
+    parser.add_argument("--progress", action="store_true", help="show a progress bar (needs tqdm)")
+    parser.add_argument("--backend", default=None, metavar="NAME",
+                        help="integrate(backend=...): auto, numpy or numba (default: the scene's, else auto)")
+    parser.add_argument("--max-steps", type=int, default=None, metavar="N",
+                        help="integrate(max_steps=N): a trajectory that needs more steps fails there (default: the "
+                             "scene's, else 10^7 — minutes on the numpy backend)")
+
+
+def _integrate_overrides(args) -> dict[str, Any]:
+    """The scene overrides of :func:`_add_integrate_options` (``--progress`` is passed where it is used)."""
+    return {"t_end": args.t_end, "backend": args.backend, "max_steps": args.max_steps}
 
 
 def _load(path: str | None, **overrides: Any):
@@ -484,7 +491,7 @@ def _figures(scene, sol, folder: Path) -> list[str] | None:
 
 # ====================================================================== check
 def _cmd_check(args) -> int:
-    scene = _load(args.scene, t_end=args.t_end, progress=args.progress or None, backend=args.backend)
+    scene = _load(args.scene, progress=args.progress or None, **_integrate_overrides(args))
     tol = scene.tol if args.tol is None else args.tol
     if not (np.isfinite(tol) and tol > 0):
         raise _UserError(f"--tol must be a positive number, got {args.tol!r}")
@@ -618,7 +625,7 @@ def _cmd_ensemble(args) -> int:
     for name, value, low in (("--n", args.n, 1), ("--workers", args.workers, 0), ("--seed", args.seed, 0)):
         if value < low:
             raise _UserError(f"{name} must be >= {low}, got {value}")
-    scene = _load(args.scene, t_end=args.t_end, backend=args.backend)
+    scene = _load(args.scene, **_integrate_overrides(args))
     system, kw = scene.build()
     sampler = Perturbation.around(system, kw.pop("Omega0"), Gamma0=kw.pop("Gamma0", None), g0=kw.pop("g0", None),
                                   scale=args.scale)
@@ -638,7 +645,7 @@ def _cmd_ensemble(args) -> int:
     print(f"{scene.name}: {ok}/{args.n} trajectories reached t = {t_span[1]:g} in {wall:.1f} s "
           f"({args.n / wall:,.0f}/s, {where}); seed {args.seed}, scale {args.scale:g}")
     if not ens.success:
-        print(f"liesuslov: error: {args.n - ok} trajectories failed: {ens.message}", file=sys.stderr)
+        print(f"liesuslov: error: {ens.message}", file=sys.stderr)  # (it counts the failures)
     print(f"wrote {args.out}{os.sep} (read it with liesuslov.open_ensemble({str(args.out)!r}))")
     return 0 if ens.success else 1
 

@@ -734,6 +734,12 @@ def test_inertia_errors():
         ls.Inertia(alg, np.diag([1.0, 0.0, 1.0]))
     with pytest.raises(TypeError, match="algebra must be a LieAlgebra"):
         ls.Inertia(np.eye(3), np.eye(3))
+    # positive but without a finite inverse (subnormal): the velocities would be inf (accepted before)
+    with pytest.raises(ValueError, match="K: the inertia's smallest eigenvalue 1e-320 has no finite inverse"):
+        ls.Inertia(alg, 1e-320 * np.eye(3))
+    with pytest.raises(ValueError, match=r"I \(the mass tensor\): the inertia's smallest eigenvalue 2e-320"):
+        ls.Inertia.from_mass_tensor([1e-320, 1e-320, 1e-320])
+    assert ls.Inertia.from_mass_tensor([1e-300, 2e-300, 3e-300]).inverse_matrix.max() == 1.0 / 3e-300
     with pytest.raises(ValueError, match="I \\(the mass tensor\\) must be symmetric"):
         ls.Inertia.from_mass_tensor(np.eye(3) + np.triu(np.ones((3, 3)), 1))
     with pytest.raises(ValueError, match="lambda_i \\+ lambda_j > 0") as info:

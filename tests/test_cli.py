@@ -196,6 +196,22 @@ def test_ensemble_command_writes_a_store_reproducible_across_workers(tmp_path, c
     assert 0 < np.abs(a.omega[0] - scene.omega0).max() < 0.1
 
 
+def test_max_steps_option_bounds_every_integrating_command(tmp_path, capsys):
+    """--max-steps reaches integrate from run, check and ensemble: a scene that needs more steps fails
+    at once with the reason (exit 1), where it would otherwise grind through 10^7 steps."""
+    scene = str(SCENES / "suslov3.toml")
+    assert cli.main(["run", scene, "--max-steps", "3", "--out", str(tmp_path / "r")]) == 1
+    assert "the integration failed: max_steps reached at t = " in capsys.readouterr().err
+    assert cli.main(["check", scene, "--max-steps", "3"]) == 1
+    assert "max_steps reached" in capsys.readouterr().err
+    assert cli.main(["ensemble", scene, "--n", "3", "--max-steps", "3", "--out", str(tmp_path / "e")]) == 1
+    err = capsys.readouterr().err
+    assert "3 of 3 trajectories failed; the first (index 0): max_steps reached" in err
+    assert np.all(ls.open_ensemble(tmp_path / "e").status == -1)
+    assert cli.main(["run", scene, "--max-steps", "0"]) == 2
+    assert "max_steps must be a positive integer, got 0" in capsys.readouterr().err
+
+
 def test_ensemble_command_bad_arguments_exit_2(tmp_path, capsys):
     assert cli.main(["ensemble", str(SCENES / "suslov3.toml"), "--n", "0", "--out", str(tmp_path)]) == 2
     assert "--n must be >= 1" in capsys.readouterr().err

@@ -252,6 +252,7 @@ def test_store_round_trip_and_partial_store(tmp_path):
     (tmp_path / "s" / "chunk-000001.npz").unlink()
     part = open_ensemble(tmp_path / "s")
     assert not part.complete and not part.success and "1 of 4 chunks missing" in part.message
+    assert "successfully" not in part.message  # (the finished run's message said so, below the missing count)
     flat = part.status.reshape(-1)
     assert np.all(flat[6:12] == -1) and np.all(flat[:6] == 0) and np.all(flat[12:] == 0)
     om = part.omega.reshape(2, 20, 3)
@@ -480,6 +481,9 @@ def test_bad_input(tmp_path):
         (dict(chunk_size=True), TypeError, "chunk_size"),
         (dict(chunk_size=2.5), TypeError, "chunk_size"),
         (dict(executor="threads"), TypeError, "executor"),
+        # the class, not an instance: its unbound submit used to fail inside as "'function' object has no attribute"
+        (dict(executor=ThreadPoolExecutor), TypeError, r"executor must be an executor instance, got the class "
+                                                       r"ThreadPoolExecutor; pass ThreadPoolExecutor\(...\)"),
         (dict(reduce="mean"), ValueError, "reduce"),
         (dict(n=10), ValueError, "sampler"),
         (dict(seed=1), ValueError, "sampler"),

@@ -873,8 +873,11 @@ def test_force_turning_non_finite_fails_at_that_time(kind, method):
     assert np.all(sol.Gamma[:, 0] <= THRESHOLD)   # only states before the (numerical) blow-up
     if method == "rkmk4":
         assert sol.t[-1] < t_star <= t_named == pytest.approx(sol.t[-1] + 0.01)
+        assert int(sol.stats["failure"]) == 1 and sol.message.startswith("non-finite state")
     else:
         assert abs(sol.t[-1] - t_star) < 1e-6 and abs(t_named - t_star) < 1e-6, (sol.t[-1], t_named, t_star)
+        # the reason is the field, not "step size underflow" (where the step size ended up)
+        assert int(sol.stats["failure"]) == 6 and sol.message.startswith("non-finite field"), sol.message
     # what was returned is the true motion (the force is the Kharlamova one before t*)
     km = KharlamovaMotion(FAIL_U0, FAIL_G0, FAIL_I, FAIL_B)
     u, G = km.state(sol.t)

@@ -628,6 +628,16 @@ def test_lyapunov_is_shift_invariant_and_refuses_rounding_level_settings():
     assert ls.lyapunov_exponent(heavy, x0, (1e10, 1e10 + 20.0), Gamma0=G0, seed=0) == lam
     with pytest.raises(ValueError, match="within the rounding of the state"):
         ls.lyapunov_exponent(heavy, x0, (0.0, 20.0), Gamma0=G0, seed=0, delta=1e-14)
+    # in a batch the message names the trajectory that decides (the largest state) and the way out
+    with pytest.raises(ValueError, match=r"of trajectory 1 \(flat index\), the batch's largest \(\|s\| = 1e\+06\)"
+                                         r".* or estimate that trajectory on its own"):
+        ls.lyapunov_exponent(heavy, np.stack([x0, 1e6 * np.asarray(x0) / np.linalg.norm(x0)]), (0.0, 20.0),
+                             Gamma0=G0, seed=0)
+    # a fixed step longer than a renormalisation interval would silently become the interval (h = 10 ran as 5)
+    with pytest.raises(ValueError, match=r"h = 10 is longer than the renormalisation interval \(5\)"):
+        ls.lyapunov_exponent(heavy, x0, (0.0, 20.0), Gamma0=G0, seed=0, method="rkmk4", h=10.0)
+    with pytest.raises(ValueError, match=r"h = 10 is longer than the renormalisation interval \(4\)"):
+        ls.lyapunov_exponent(heavy, x0, (0.0, 20.0), Gamma0=G0, seed=0, method="rkmk4", h=10.0, renormalize_every=4)
     for big in (0.5, 1e-2):  # a companion that far is not a tangent vector (0.5 moved a free body's exponent 10 %)
         with pytest.raises(ValueError, match="delta must be small"):
             ls.lyapunov_exponent(heavy, x0, (0.0, 20.0), Gamma0=G0, seed=0, delta=big)

@@ -99,6 +99,28 @@ def test_run_and_options():
     assert sol2.t.size != sol.t.size
 
 
+def test_max_steps_from_the_scene_and_the_overrides():
+    """[integrate].max_steps reaches integrate (a run that needs more fails there, with the time); the
+    CLI's override replaces it; a non-integer or a value below 1 is refused naming the field."""
+    s = _load(BODY + "max_steps = 5\n")
+    assert s.max_steps == 5 and s.build()[1]["max_steps"] == 5
+    sol = s.run()
+    assert sol.status == -1 and sol.message.startswith("max_steps reached at t = ")
+    assert sol.stats["steps"] + sol.stats["rejected"] == 5
+    assert "max_steps" not in _load(BODY).build()[1]  # unset: integrate's default
+    longer = s.with_options(max_steps=10_000)
+    assert longer.run().success and longer.data["integrate"]["max_steps"] == 10_000
+    assert _load(longer.to_toml()).max_steps == 10_000
+    with pytest.raises(ValueError, match=r"\[integrate\].max_steps must be an integer >= 1, got 0"):
+        _load(BODY + "max_steps = 0\n")
+    with pytest.raises(TypeError, match=r"\[integrate\].max_steps must be an integer"):
+        _load(BODY + "max_steps = 2.5\n")
+    with pytest.raises(ValueError, match="max_steps must be a positive integer"):
+        s.with_options(max_steps=0)
+    with pytest.raises(TypeError, match="max_steps must be an integer"):
+        s.with_options(max_steps=10.0)
+
+
 def test_explicit_t_eval_and_every_step():
     s = _load(BODY + "t_eval = [0.0, 0.25, 0.5, 1.0]\n")
     np.testing.assert_array_equal(s.run().t, [0.0, 0.25, 0.5, 1.0])

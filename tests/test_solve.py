@@ -820,6 +820,18 @@ def test_small_distances_from_D_and_bad_counts_are_refused():
         ls.integrate(system, off, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45")
     with pytest.raises(ValueError, match="max_steps"):
         ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", max_steps=0)
+    # a wrong type is a TypeError (1e7 is a float: the message says how to write it)
+    with pytest.raises(TypeError, match=r"max_steps must be an integer, got 10000000.0 \(write 10_000_000"):
+        ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", max_steps=1e7)
+    # an empty batch names the input whose batch axes are empty (it named Omega0 for an empty Gamma0)
+    with pytest.raises(ValueError, match=r"batch shape \(0,\): the batch axes of Gamma0 \(0,\)\); pass at least one"):
+        ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=np.zeros((0, 4)), method="rkmk45")
+    with pytest.raises(ValueError, match=r"the batch axes of Omega0 \(2, 0\), g0 \(0,\)\)"):
+        ls.integrate(system, np.zeros((2, 0, 4, 4)), (0.0, 1.0), Gamma0=Gamma0, reconstruct=True,
+                     g0=np.zeros((0, 4, 4)), method="rkmk45")
+    for span in [(0.0, 1j), (0.0, np.complex128(1.0))]:  # complex: TypeError, as for Omega0 (was a ValueError)
+        with pytest.raises(TypeError, match="t_span must be a pair of numbers"):
+            ls.integrate(system, Omega0, span, Gamma0=Gamma0, method="rkmk45")
     with pytest.raises(ValueError, match="t_eval must be strictly increasing"):
         ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", t_eval=[0.0, 0.5, 0.5, 1.0])
     g0 = np.stack([np.eye(4), np.diag([1.0, 1.0, 1.0, -1.0]), np.eye(4)])

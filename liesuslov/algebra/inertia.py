@@ -83,6 +83,7 @@ class Inertia:
         lam = np.linalg.eigvalsh(K)
         if lam[0] <= 0:
             raise ValueError(f"K must be positive definite: its smallest eigenvalue is {lam[0]:.6g}")
+        _check_invertible(lam[0], "K")
         K.setflags(write=False)
         self.algebra = algebra
         self.__dict__["matrix"] = K  # fills the cached property
@@ -141,6 +142,7 @@ class Inertia:
             raise ValueError("I (the mass tensor) gives an inertia J(Omega) = I Omega + Omega I that is not "
                              "positive definite: J > 0 iff lambda_i + lambda_j > 0 for all i != j "
                              f"(eigenvalues of I); here the two smallest sum to {lam[0] + lam[1]:.6g}")
+        _check_invertible(lam[0] + lam[1], "I (the mass tensor)")
         self = cls.__new__(cls)
         alg = so(n)
         self.algebra = alg
@@ -336,3 +338,13 @@ class Inertia:
             raise TypeError(f"expected a Subspace, got {type(D).__name__}")
         if D.algebra.dim != self.algebra.dim:
             raise ValueError(f"the subspace lives in {D.algebra.name}, the inertia in {self.algebra.name}")
+
+
+def _check_invertible(smallest: float, name: str) -> None:
+    """ValueError naming ``name`` when the inertia's smallest eigenvalue ``smallest`` (> 0) has no finite inverse:
+    a scale near the bottom of the float range (1e-320) passes "positive definite" but every velocity from a
+    momentum would be inf."""
+    with np.errstate(divide="ignore", over="ignore"):
+        if not np.isfinite(1.0 / smallest):
+            raise ValueError(f"{name}: the inertia's smallest eigenvalue {smallest:.3g} has no finite inverse (below "
+                             "the float range): rescale the units of mass or length")

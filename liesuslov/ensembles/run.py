@@ -70,8 +70,9 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
         pickled (the compiled kernel releases the GIL; numpy code on small arrays mostly holds it).
     store : str or PathLike, optional
         A directory the results stream to (created; an existing store is refused unless
-        ``overwrite=True``; ``""`` is refused: pass ``"."`` for the current directory). The returned
-        Ensemble then reads from it lazily.
+        ``overwrite=True``; ``""`` is refused: pass ``"."`` for the current directory). An existing directory
+        that holds no store is written into: its own files stay, and even ``overwrite=True`` only ever deletes
+        a store's ``chunk-*.npz`` files and manifest. The returned Ensemble then reads from it lazily.
     sampler : callable, optional
         A module-level callable (or :class:`Perturbation`) ``sampler(rng, size) -> dict`` with
         ``"Omega0"`` (size, ...) and optionally ``"Gamma0"``, ``"g0"``, called on the workers: block ``j``
@@ -136,6 +137,9 @@ def ensemble(system, Omega0=None, t_span=None, *, Gamma0=None, g0=None, t_eval=N
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be True or False, got {type(progress).__name__}")
     retries = _nonneg_int(retries, "retries")
+    if isinstance(executor, type):  # the class has a submit too, an unbound one
+        raise TypeError(f"executor must be an executor instance, got the class {executor.__name__}; pass "
+                        f"{executor.__name__}(...), e.g. {executor.__name__}(max_workers=2), and shut it down after")
     if executor is not None and not callable(getattr(executor, "submit", None)):
         raise TypeError(f"executor must be None, a concurrent.futures.Executor or a dask.distributed.Client "
                         f"(something with submit), got {type(executor).__name__}")

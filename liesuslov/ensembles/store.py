@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from .._io import atomic_create, atomic_write
+from ..integrators.problem import SUCCESS_MESSAGE
 from .checks import _naming
 from .constants import (
     _ARRAYS,
@@ -194,8 +195,10 @@ def open_ensemble(store) -> Ensemble:
     missing = [i for i, p in enumerate(present) if not p and i not in failed]
     message = man.get("message", "")
     if missing:
+        # (the manifest's message is a finished run's: its success is not this store's)
+        rest = "" if message == SUCCESS_MESSAGE else f" The run's message: {message}"
         message = (f"{len(missing)} of {len(bounds)} chunks missing from the store (status -1, values NaN); "
-                   "the run was interrupted or is still going. " + message).strip()
+                   f"the run was interrupted or is still going, or a chunk file was removed.{rest}").strip()
     if missing or not man.get("complete"):
         # the manifest's counts are those of a finished run: here, the sums over the chunks in the store
         stats = {k: v for k, v in stats.items() if k not in _SUMMED}

@@ -169,7 +169,10 @@ def integrate(system, Omega0, t_span, *, Gamma0=None, g0=None, reconstruct: bool
         raise ValueError(f"chart must be one of {CHARTS}, got {chart!r}")
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    if isinstance(max_steps, (bool, np.bool_)) or not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
+    if isinstance(max_steps, (bool, np.bool_)) or not isinstance(max_steps, (int, np.integer)):
+        raise TypeError(f"max_steps must be an integer, got {max_steps!r}" + (" (write 10_000_000, not 1e7)"
+                                                                              if isinstance(max_steps, float) else ""))
+    if max_steps < 1:
         raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
     meth = METHODS[method]
     t0, t1 = check_t_span(t_span)
@@ -289,8 +292,11 @@ def _initial_data(system, is_model, Omega0, Gamma0, g0, reconstruct, form):
     except ValueError as exc:
         raise ValueError(f"the batch axes of Omega0, Gamma0 and g0 do not broadcast: {shapes}") from exc
     if math.prod(batch_shape) == 0:
-        raise ValueError(f"the batch of initial data is empty (batch shape {batch_shape}); pass at least one "
-                         "Omega0")
+        names = ["Omega0"] + (["Gamma0"] if G0_ is not None else []) + (["g0"] if g_init is not None else [])
+        empty = ", ".join(f"{name} {shape}" for name, shape in zip(names, shapes, strict=True)
+                          if math.prod(shape) == 0 and shape != ())
+        raise ValueError(f"the batch of initial data is empty (batch shape {batch_shape}: the batch axes of {empty}); "
+                         "pass at least one initial state")
     return model, x0, G0_, g_init, batch_shape
 
 

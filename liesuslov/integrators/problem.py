@@ -25,10 +25,12 @@ import numpy as np
 from .._validation import read_only
 from .plan import StagePlan
 
-__all__ = ["Problem", "RawResult", "STATUS_FAILED", "STATUS_REACHED", "STATUS_TERMINAL", "FAILURES", "run_message",
-           "RENORM_EVERY"]
+__all__ = ["Problem", "RawResult", "STATUS_FAILED", "STATUS_REACHED", "STATUS_TERMINAL", "FAILURES", "SUCCESS_MESSAGE",
+           "run_message", "RENORM_EVERY"]
 
 STATUS_REACHED, STATUS_TERMINAL, STATUS_FAILED = 0, 1, -1
+#: The message of a run in which every trajectory reached the end of t_span (scipy's words).
+SUCCESS_MESSAGE = "The solver successfully reached the end of the integration interval."
 
 #: Why a trajectory failed (``RawResult.failure`` codes; 0 = did not fail).
 FAILURES = {
@@ -39,6 +41,8 @@ FAILURES = {
        "the Cayley map; lower h)",
     5: "the fixed step h is below ten ulps of t within t_span (t0 + i h cannot be represented: raise h, or move "
        "t_span nearer 0)",
+    6: "non-finite field beyond the state (every step tried from there, down to ten ulps of t, met a non-finite "
+       "value: a singularity, or the end of the field's domain)",
 }
 
 
@@ -47,7 +51,7 @@ def run_message(status: np.ndarray, t_stop: np.ndarray, failure: np.ndarray | No
     the first failure with its reason and time, else how many a terminal event stopped, else success. One
     source for :func:`~.integrate.integrate` and the ensembles (``failure`` None: the reason is not known)."""
     if not np.count_nonzero(status):  # (ndarray.any: ~3 µs on one entry)
-        return "The solver successfully reached the end of the integration interval."
+        return SUCCESS_MESSAGE
     failed = np.flatnonzero(status < 0)
     if failed.size:
         b = int(failed[0])

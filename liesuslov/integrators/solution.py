@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .problem import SUCCESS_MESSAGE
+
 __all__ = ["Solution"]
 
 _ARRAYS = ("t", "xi", "omega", "Gamma", "g")
@@ -57,7 +59,7 @@ class Solution:
     g: np.ndarray | None = None
     stats: dict = field(default_factory=dict)
     status: np.ndarray | int = 0
-    message: str = "The solver successfully reached the end of the integration interval."
+    message: str = SUCCESS_MESSAGE
     n: int | None = None
     algebra_name: str = ""
     events: list = field(default_factory=list)

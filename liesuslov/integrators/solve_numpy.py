@@ -169,14 +169,15 @@ class _Solve:
     """The time loop over the working set: the trajectories still running (and some that ended, until
     the set is compressed), each row with its own time, step size, counters and cached field value.
 
-    Row arrays (A rows): ``idx`` (the trajectory), ``t``, ``h_abs``, ``after_reject``, ``steps``,
+    Row arrays (A rows): ``idx`` (the trajectory), ``t``, ``h_abs``, ``after_reject``, ``nonfinite_trial`` (the
+    last trial step, inside the chart's domain, met a non-finite value: an underflow then is failure 6), ``steps``,
     ``rejected``, ``nfev``, ``xi`` (A, k), ``G`` (A, m, m) / (A, n) / None, ``gamma`` (A, n) / None,
     ``first`` (A, k) and ``have_first`` (the field at the current point, reused as the next stage 0),
     ``ev_old`` (A, E), ``next_out`` (first t_eval index not yet written), ``live``.
     """
 
-    _ROWS = ("idx", "t", "h_abs", "after_reject", "steps", "rejected", "nfev", "xi", "G", "gamma", "first",
-             "have_first", "ev_old", "next_out", "live")
+    _ROWS = ("idx", "t", "h_abs", "after_reject", "nonfinite_trial", "steps", "rejected", "nfev", "xi", "G", "gamma",
+             "first", "have_first", "ev_old", "next_out", "live")
 
     def __init__(self, P: Problem, done) -> None:
         self.P, self.done_cb = P, done
@@ -200,6 +201,7 @@ class _Solve:
         self.t = np.full(B, P.t0)
         self.h_abs = np.zeros(B)
         self.after_reject = np.zeros(B, dtype=bool)
+        self.nonfinite_trial = np.zeros(B, dtype=bool)
         self.steps = np.zeros(B, np.int64)
         self.rejected = np.zeros(B, np.int64)
         self.nfev = np.zeros(B, np.int64)
@@ -334,7 +336,9 @@ class _Solve:
             self._fail(live & (self.steps + self.rejected >= P.max_steps), 3, t)
         self.tries += 1
         if P.adaptive and self.h_abs.min() < self.h_floor:  # below ten ulps of t the step no longer moves t
-            self._fail(live & control.underflow(self.h_abs, t, direction), 2, t)
+            under = live & control.underflow(self.h_abs, t, direction)
+            self._fail(under & ~self.nonfinite_trial, 2, t)
+            self._fail(under & self.nonfinite_trial, 6, t)
         n_live = int(np.count_nonzero(live))
         if n_live == 0:
             return
@@ -377,6 +381,8 @@ class _Solve:
             finite = np.all(np.isfinite(step.xi1), axis=1)
             if G1 is not None:
                 finite &= np.all(np.isfinite(G1.reshape(G1.shape[0], -1)), axis=1)
+        if P.adaptive:
+            self.nonfinite_trial = step.ok & ~finite
         good = accepted & finite & step.ok
         sel, n = _where(good)
         if n < np.count_nonzero(accepted):

@@ -179,14 +179,19 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
     # the rounding of the states, ~eps |s|, must stay far below delta, and its share of the estimate,
     # ~eps |s| / (delta T), far below any exponent of interest (below: 1.4 at delta = 1e-14, 1e290 at T = 1e-300)
     s0 = b.reduced(b.omega, b.Gamma)  # (B, k [+ n])
-    size = float(np.max(np.linalg.norm(s0, axis=-1), initial=0.0))
+    sizes = np.linalg.norm(s0, axis=-1)
+    largest = int(np.argmax(sizes)) if sizes.size else 0
+    size = float(sizes[largest]) if sizes.size else 0.0
+    # (one delta for the batch: the largest state decides; the message names it, for a batch of mixed scales)
+    which = "" if b.size == 1 else f" of trajectory {largest} (flat index), the batch's largest"
     if delta < DELTA_FLOOR * max(size, 1.0):
-        raise ValueError(f"delta = {delta:g} is within the rounding of the state (|s| = {size:.3g}): pass "
-                         f"delta >= {DELTA_FLOOR * max(size, 1.0):.3g} (the default 1e-7 is safe)")
+        raise ValueError(f"delta = {delta:g} is within the rounding of the state{which} (|s| = {size:.3g}): pass "
+                         f"delta >= {DELTA_FLOOR * max(size, 1.0):.3g} (the default 1e-7 is safe up to |s| = 1e5)"
+                         + ("" if b.size == 1 else ", or estimate that trajectory on its own with a larger delta"))
     if span * delta < NOISE_FLOOR * max(size, 1.0):
         raise ValueError(f"t_span is too short (T = {span:g}) for an exponent with delta = {delta:g}: rounding alone "
-                         f"would move it by ~{2.2e-16 * max(size, 1.0) / (delta * span):.3g}; integrate over "
-                         f"T >= {NOISE_FLOOR * max(size, 1.0) / delta:.3g}")
+                         f"would move it by ~{2.2e-16 * max(size, 1.0) / (delta * span):.3g} (|s| = {size:.3g}"
+                         f"{which}); integrate over T >= {NOISE_FLOOR * max(size, 1.0) / delta:.3g}")
     if renormalize_every is None:
         K = max(1, int(round(span / 5.0)))
     else:
@@ -199,6 +204,12 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
                          f"(~0.5 ms): more than {MAX_INTERVALS:.0e}; pass renormalize_every >= "
                          f"{span / MAX_INTERVALS:.3g} (the exponent does not depend on it while the separation "
                          "stays linear) or a shorter t_span")
+    h = opts.get("h")
+    if R.adaptive(opts["method"]) is False and isinstance(h, (int, float, np.integer, np.floating)) \
+            and not isinstance(h, (bool, np.bool_)) and abs(h) > span / K:
+        # each interval is its own integrate call: a longer fixed step would silently become the interval
+        raise ValueError(f"h = {h:g} is longer than the renormalisation interval ({span / K:g}), which would cut "
+                         f"every step to it; pass h <= {span / K:g}, or renormalize_every >= {abs(h):g}")
     seed_key = _seed_key(seed)
     B = b.size
     Dbasis = system.constraints.basis

@@ -93,6 +93,7 @@ def scene_from_dict(d: Mapping[str, Any], source: str = "<scene>", name: str | N
     reconstruct = it.boolean("reconstruct", default=False)
     progress = it.boolean("progress", default=False)
     backend = it.choice("backend", _backends(), default=None) if it.has("backend") else None
+    max_steps = it.integer("max_steps", default=None, minimum=1)
     alg = system.algebra
     if reconstruct and alg.matrix_size is None:
         raise it.error("reconstruct", f"= true needs a matrix representation of {alg.name}: give "
@@ -111,7 +112,8 @@ def scene_from_dict(d: Mapping[str, Any], source: str = "<scene>", name: str | N
 
     return Scene(name=out_name, system=system, omega0=omega0, t_span=t_span, Gamma0=Gamma0, g0=g0,
                  method=method, chart=chart, form=form, h=h, rtol=rtol, atol=atol, n_out=n_out, t_eval=t_eval,
-                 every_step=every_step, reconstruct=reconstruct, progress=progress, backend=backend, out_dir=out_dir,
+                 every_step=every_step, reconstruct=reconstruct, progress=progress, backend=backend,
+                 max_steps=max_steps, out_dir=out_dir,
                  figures=figures, tol=tol, case=case, description=description, source=source,
                  data=plain(dict(d)))
 

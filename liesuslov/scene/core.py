@@ -45,6 +45,8 @@ class Scene:
     reconstruct, progress, figures : bool
     backend : str or None
         ``backend`` of :func:`~liesuslov.integrate` ("auto", "numpy", "numba"); None: its default.
+    max_steps : int or None
+        ``max_steps`` of :func:`~liesuslov.integrate` (per trajectory); None: its default, 10⁷.
     out_dir : str
     tol : float
         Tolerance of ``liesuslov check`` (``[check].tol``).
@@ -75,6 +77,7 @@ class Scene:
     reconstruct: bool = False
     progress: bool = False
     backend: str | None = None
+    max_steps: int | None = None
     out_dir: str = "liesuslov-out"
     figures: bool = True
     tol: float = 1e-8
@@ -115,7 +118,7 @@ class Scene:
         system : SuslovSystem
         kwargs : dict
             ``Omega0``, ``t_span``, ``Gamma0``, ``g0``, ``reconstruct``, ``method``, ``chart``, ``h``,
-            ``rtol``, ``atol``, ``t_eval``, ``form``, ``progress``, ``backend`` (absent where unset):
+            ``rtol``, ``atol``, ``t_eval``, ``form``, ``progress``, ``backend``, ``max_steps`` (absent where unset):
             ``ls.integrate(system, **kwargs)`` runs the scene.
         """
         kw: dict[str, Any] = {"Omega0": self.omega0.copy(), "t_span": tuple(self.t_span),
@@ -130,6 +133,8 @@ class Scene:
             kw["g0"] = self.g0.copy()
         if self.backend is not None:
             kw["backend"] = self.backend
+        if self.max_steps is not None:
+            kw["max_steps"] = self.max_steps
         return self.system, kw
 
     def run(self, **overrides):
@@ -150,8 +155,9 @@ class Scene:
     # ------------------------------------------------------------------ variants
     def with_options(self, *, t_end: float | None = None, out_dir: str | None = None,
                      figures: bool | None = None, progress: bool | None = None,
-                     backend: str | None = None) -> Scene:
-        """A copy with the end time, output folder, figures, progress bar or backend changed (the CLI's overrides).
+                     backend: str | None = None, max_steps: int | None = None) -> Scene:
+        """A copy with the end time, output folder, figures, progress bar, backend or max_steps changed (the CLI's
+        overrides).
 
         Explicit ``t_eval`` times beyond a shorter ``t_end`` are dropped (``t_end`` itself is kept).
         """
@@ -189,6 +195,13 @@ class Scene:
                 raise ValueError(f"backend must be one of {', '.join(choices)}, got {backend!r}")
             changes["backend"] = str(backend)
             data.setdefault("integrate", {})["backend"] = str(backend)
+        if max_steps is not None:
+            if isinstance(max_steps, bool) or not isinstance(max_steps, int):
+                raise TypeError(f"max_steps must be an integer, got {max_steps!r}")
+            if max_steps < 1:
+                raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
+            changes["max_steps"] = max_steps
+            data.setdefault("integrate", {})["max_steps"] = max_steps
         return replace(self, data=data, **changes)
 
     def to_toml(self) -> str:

@@ -20,7 +20,7 @@ _TOP_KEYS = ("description", "gyroscopic", "case", "body", "constraints", "potent
 _BODY_KEYS = ("algebra", "n", "mass_tensor", "principal_moments", "inertia", "structure_constants",
               "representation")
 _INTEGRATE_KEYS = ("t_span", "method", "chart", "h", "rtol", "atol", "n_out", "t_eval", "reconstruct",
-                   "progress", "form", "backend")
+                   "progress", "form", "backend", "max_steps")
 _CALLABLE_PARAMETERS = ("v1", "dv1", "v2", "dv2")
 _DEFAULT_N_OUT = 501
 # Output times are held in memory (state x times x batch numbers): 10^7 times of a small state is

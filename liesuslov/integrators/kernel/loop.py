@@ -612,6 +612,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
 
         # ---------------------------------------------------------------- the time loop
         after_reject = False
+        nonfinite_trial = False  # the last trial step, inside the chart's domain, met a non-finite value
         nc = i1
         if not adaptive and not hfix >= _step_floor(t0, t1):  # below the resolution of t: the grid is not t0 + i h
             fail = 5
@@ -625,7 +626,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                 break
             if adaptive:
                 if _underflow(h, t, direction):
-                    fail = 2
+                    fail = 6 if nonfinite_trial else 2
                     break
                 last = abs(h) >= abs(t1 - t)
                 if last:
@@ -716,6 +717,7 @@ def _solve_one(family, lo, hi, iprm, fprm, xi0, G0, gamma, t_eval, ev_coef, ev_o
                 if adaptive:
                     nrm = _error_norm(family, kind, mode, err, s_eval, rtol, atol, xi, xi1, G, G1, hL, hK, Ea, Eg, Q,
                                       nc, r, bufs, PQ, PQ2)
+                    nonfinite_trial = ok and not finite
                     if not (ok and finite):
                         nrm = np.inf
                     if not (nrm <= 1.0):
