@@ -72,6 +72,11 @@ def __getattr__(name: str):
         return getattr(importlib.import_module(_LAZY[name], __name__), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
+
+def __dir__() -> list[str]:
+    """The module's names with the lazy ones (tab completion lists ``ls.ensemble`` before its first use)."""
+    return sorted({*globals(), *_LAZY})
+
 __all__ = ["LieAlgebra", "se", "so", "SpecialOrthogonalAlgebra", "wedge", "pairing", "hat3", "vee3",
            "Subspace", "is_symmetric_pair", "suslov_distribution", "Inertia",
            "Potential", "LinearPotential", "QuadraticPotential", "FamilyPotential", "ZeroPotential",

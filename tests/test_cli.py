@@ -319,3 +319,13 @@ def test_atomic_files_get_the_umask_mode_without_changing_the_umask(tmp_path, mo
         assert created.read_bytes() == b"y" and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt"]
     finally:
         real_umask(old)
+
+
+def test_dir_lists_the_lazy_names_without_importing_them():
+    """dir(liesuslov) lists every public name, the lazily imported ones too (tab completion missed
+    ls.ensemble, ls.poincare_section, ...), and listing them imports nothing."""
+    code = ("import sys, liesuslov as ls; names = dir(ls); "
+            "print(sorted(set(ls.__all__) - set(names)), 'liesuslov.research' in sys.modules, "
+            "'liesuslov.ensembles' in sys.modules, 'ensemble' in names and 'poincare_section' in names)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert r.stdout.strip() == "[] False False True"

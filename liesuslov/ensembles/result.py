@@ -170,8 +170,7 @@ class Ensemble:
     @property
     def events(self) -> list:
         """One :class:`~liesuslov.EventRecord` per event function (``events=`` of integrate), as a Solution's:
-        the crossings of every trajectory computed, sorted by index and then in the order of integration
-        (decreasing t for a backward run), ``index`` flat over the whole batch."""
+        the crossings of every trajectory computed, sorted by (index, t), ``index`` flat over the whole batch."""
         from ..integrators import EventRecord
 
         if self._event_parts is not None:
@@ -192,8 +191,8 @@ class Ensemble:
             if cols["t"] is None:  # no chunk computed: empty arrays of the right trailing shapes
                 cols["t"], cols["index"] = np.empty(0), np.empty(0, dtype=np.int64)
                 cols["omega"] = np.empty((0,) + self._tails["omega"])
-            # by trajectory; a trajectory's crossings come from one chunk, in its order of integration (as
-            # integrate gives them: decreasing t for a backward run), which a stable sort keeps
+            # by trajectory; a trajectory's crossings come from one chunk, sorted by t (as integrate gives
+            # them), which a stable sort keeps
             order = np.argsort(cols["index"], kind="stable")
             cols = {f: None if v is None else v[order] for f, v in cols.items()}
             out.append(EventRecord(n=self.n, algebra_name=self.algebra_name, **cols))

@@ -35,8 +35,8 @@ __all__ = ["EventRecord", "LinearEvent", "coordinate_plane", "gamma_crossing", "
 class EventRecord:
     """The crossings of one event function, for all trajectories, sorted by (index, t).
 
-    Within a trajectory the crossings come in the order the integration met them: ``t`` increasing, or
-    decreasing when integrating backward (``t_span[1] < t_span[0]``), as scipy's ``t_events``.
+    Within a trajectory ``t`` increases, also when integrating backward (``t_span[1] < t_span[0]``: the
+    reverse of the order the integration met them, which is scipy's ``t_events`` order).
 
     Attributes
     ----------

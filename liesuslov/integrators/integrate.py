@@ -465,9 +465,14 @@ def _solution(raw: RawResult, P: Problem, batch_shape, method, chart, wall, reas
              "failure": raw.failure.reshape(batch_shape)}
     records = []
     for e in range(P.n_events):
-        idx = raw.event_index[e]
-        ge, Ge = _group_arrays(P, raw.event_G[e][:, None, :], (idx.size, 1), lambda idx=idx: idx[:, None])
-        records.append(EventRecord(t=raw.event_t[e], index=idx, omega=model.omega_coords(raw.event_xi[e]),
+        idx, t_e, xi_e, G_e = raw.event_index[e], raw.event_t[e], raw.event_xi[e], raw.event_G[e]
+        if P.direction < 0 and idx.size > 1:
+            # both solvers give each trajectory's crossings in the order met: decreasing t on a backward run;
+            # the record is sorted by (index, t) (API.md), as a forward run's is by construction
+            order = np.lexsort((t_e, idx))
+            idx, t_e, xi_e, G_e = idx[order], t_e[order], xi_e[order], G_e[order]
+        ge, Ge = _group_arrays(P, G_e[:, None, :], (idx.size, 1), lambda idx=idx: idx[:, None])
+        records.append(EventRecord(t=t_e, index=idx, omega=model.omega_coords(xi_e),
                                    Gamma=None if Ge is None else Ge[:, 0], g=None if ge is None else ge[:, 0],
                                    n=model.n, algebra_name=model.algebra.name))
     return Solution(t=np.asarray(raw.t, dtype=float), xi=xi, omega=omega, Gamma=Gamma, g=g, stats=stats,

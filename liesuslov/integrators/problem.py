@@ -35,7 +35,8 @@ SUCCESS_MESSAGE = "The solver successfully reached the end of the integration in
 #: Why a trajectory failed (``RawResult.failure`` codes; 0 = did not fail).
 FAILURES = {
     1: "non-finite state",
-    2: "step size underflow (the solution is probably singular there, or the tolerances are below rounding)",
+    2: "step size underflow (the solution is probably singular there, or the tolerances are below rounding, or t "
+       "is so large that few floats lie in t_span: move t_span nearer 0)",
     3: "max_steps reached",
     4: "step beyond the chart's domain (|h Omega| too large: a turn of pi for the exponential, a diverging run for "
        "the Cayley map; lower h)",
