@@ -9,6 +9,7 @@ so(n) is -1/2 tr(AB)).
 from __future__ import annotations
 
 import math
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -16,7 +17,16 @@ from .._rows import rows_at, vectors
 from .._validation import as_float_array, check_symmetric
 from .lie import LieAlgebra
 
-__all__ = ["Subspace", "is_symmetric_pair", "suslov_distribution"]
+__all__ = ["Subspace", "is_symmetric_pair", "suslov_distribution", "SymmetricOperator"]
+
+
+@runtime_checkable
+class SymmetricOperator(Protocol):
+    """A symmetric operator on the algebra given by its matrix ``K`` (d, d) in the algebra's basis — an
+    :class:`~liesuslov.algebra.inertia.Inertia` (which this layer cannot import: it imports this one)."""
+
+    @property
+    def matrix(self) -> np.ndarray: ...
 
 _RANK_TOL = 1e-10
 #: Largest dimension d for which :meth:`Subspace.contains` keeps the (d, d) residual projector.
@@ -223,7 +233,7 @@ class Subspace:
         B = self.basis
         if metric is None:
             return B.T @ B
-        K = metric.matrix if hasattr(metric, "matrix") else as_float_array(metric, "metric")
+        K = metric.matrix if isinstance(metric, SymmetricOperator) else as_float_array(metric, "metric")
         d = self.algebra.dim
         if K.shape != (d, d):
             raise ValueError(f"metric must have shape ({d}, {d}), got {K.shape}")
