@@ -1,4 +1,5 @@
-"""Writing files so that nothing is ever half-written: the one atomic writer of the package.
+"""Writing files so that nothing is ever half-written: the one atomic writer of the package; and reading the
+``.npz`` files it wrote, a damaged or foreign one a clear error (:func:`read_npz`).
 
 :func:`atomic_write` creates a file through a temporary name in the same folder and renames it into
 place (``os.replace`` is atomic on POSIX and Windows within one file system), so a reader, a crash or
@@ -10,10 +11,35 @@ from __future__ import annotations
 
 import os
 import secrets
-from collections.abc import Callable, Iterable
+import zipfile
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_write", "atomic_create", "write_text", "publish"]
+__all__ = ["atomic_write", "atomic_create", "write_text", "publish", "read_npz"]
+
+
+@contextmanager
+def read_npz(path: Path, what: str, fix: str) -> Iterator:
+    """``np.load(path)`` of an ``.npz`` the package wrote, for the ``with`` body that reads it; any failure there
+    — a truncated, overwritten or foreign file, a member or key missing — a ValueError naming ``what`` (e.g.
+    "the file 'run.npz'") and saying ``fix``. A missing file stays a FileNotFoundError.
+
+    numpy's own message for a file that is not an ``.npz`` suggests ``allow_pickle=True``, which is wrong here
+    (the package writes no object arrays); members are read lazily (``z[key]``), so the whole body is covered:
+    keep it to reading the file.
+    """
+    import numpy as np
+
+    if not Path(path).exists():
+        raise FileNotFoundError(f"{what} does not exist")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            yield z
+    except (ValueError, KeyError, TypeError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        detail = "" if "pickle" in str(exc) else f": {exc}"  # (not numpy's advice to load it with pickle)
+        raise ValueError(f"{what} is damaged or was not written by liesuslov ({type(exc).__name__} reading it"
+                         f"{detail}); {fix}") from exc
 
 
 def _new_file(p: Path) -> tuple[int, str]:

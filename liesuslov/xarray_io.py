@@ -7,9 +7,13 @@ Dimensions: ``time`` (with the output times as its coordinate), the batch axes `
 ``batch_1``, ... (none for a single trajectory), and the components: ``xi_component`` (k, reduced
 coordinates in D), ``omega_component`` (d, the algebra basis), ``gamma_component`` (n),
 ``g_row``/``g_column`` (m, m). ``Omega`` as matrices is not stored (it is ``so(n).hat(omega)``).
-``status`` is a variable over the batch dims (a 0-d variable when the solver reports one status).
-The attributes hold ``algebra_name``, ``n``, ``message`` and ``stats`` as a JSON string (netCDF
-attributes must be plain numbers and strings).
+``status`` is a variable over the batch dims (a 0-d variable when the solver reports one status), and so is
+each per-trajectory statistic (``t_stop``, ``failure``, ``trajectory_nfev``, ...: ``stats`` entries of the
+batch's shape). Event records, one per event function ``j``, are variables over their own dimension
+``event{j}_crossing``: ``event{j}_t``, ``event{j}_index`` (flat batch index), ``event{j}_omega``
+(``omega_component``), ``event{j}_Gamma``, ``event{j}_g``. The attributes hold ``algebra_name``, ``n``,
+``message`` and the other ``stats`` as a JSON string (netCDF attributes must be plain numbers and strings;
+a non-finite number is written ``null``, as strict JSON has no NaN).
 """
 
 from __future__ import annotations
@@ -34,10 +38,19 @@ def _import_xarray():
 
 
 def _plain(x: Any) -> Any:
-    if isinstance(x, np.generic):
-        return x.item()
+    """``x`` as plain JSON data: numpy scalars and arrays as numbers and lists, non-finite floats as None."""
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
     if isinstance(x, np.ndarray):
-        return x.tolist()
+        return _plain(x.tolist())
+    if isinstance(x, np.generic):
+        return _plain(x.item())
+    if isinstance(x, float):
+        return x if np.isfinite(x) else None
+    if x is None or isinstance(x, (bool, int, str)):
+        return x
     return str(x)
 
 
@@ -54,7 +67,8 @@ def solution_to_xarray(sol) -> Any:
     -------
     xarray.Dataset
         Variables ``xi``, ``omega``, ``Gamma``, ``g`` (those present) with dims
-        ``("time", "batch_0", ..., components...)`` and ``status`` with the batch dims.
+        ``("time", "batch_0", ..., components...)``; ``status`` and the per-trajectory statistics with the
+        batch dims; the event records over ``event{j}_crossing`` (module docstring).
 
     Raises
     ------
@@ -73,8 +87,21 @@ def solution_to_xarray(sol) -> Any:
         a = np.asarray(a)
         data_vars[name] = (("time",) + batch_dims + comps, a)
     status = np.asarray(getattr(sol, "status", 0))
-    data_vars["status"] = (batch_dims if status.ndim == batch_ndim and status.ndim else (), status)
+    status_dims = batch_dims if status.ndim == batch_ndim and status.ndim else ()
+    data_vars["status"] = (status_dims, status)
+    stats = dict(getattr(sol, "stats", {}))
+    for key, value in list(stats.items()):
+        # per trajectory: a variable over the batch dims (a list in the JSON attribute would lose the dims)
+        if isinstance(value, np.ndarray) and value.shape == status.shape and key not in data_vars:
+            data_vars[key] = (status_dims, stats.pop(key))
+    for j, rec in enumerate(getattr(sol, "events", None) or []):
+        along = f"event{j}_crossing"
+        for name, comps in (("t", ()), ("index", ()), ("omega", ("omega_component",)),
+                            ("Gamma", ("gamma_component",)), ("g", ("g_row", "g_column"))):
+            a = getattr(rec, name, None)
+            if a is not None:
+                data_vars[f"event{j}_{name}"] = ((along,) + comps, np.asarray(a))
     attrs = {"algebra_name": str(getattr(sol, "algebra_name", "")), "n": -1 if sol.n is None else int(sol.n),
              "message": str(getattr(sol, "message", "")),
-             "stats": json.dumps(getattr(sol, "stats", {}), default=_plain)}
+             "stats": json.dumps(_plain(stats), allow_nan=False)}
     return xr.Dataset(data_vars, coords={"time": np.asarray(sol.t, dtype=float)}, attrs=attrs)

@@ -264,6 +264,31 @@ def test_section_command_writes_crossings_and_integral_drift(tmp_path, capsys):
     assert "--index" in capsys.readouterr().err
 
 
+def test_section_and_phase_commands_take_max_steps_and_leave_no_stale_figure(tmp_path, capsys):
+    """An audit: section and phase ignored the scene's max_steps (and had no --max-steps); a section never
+    crossed said nothing and left the previous run's section.png beside a report of 0 crossings."""
+    out = tmp_path / "sec"
+    scene = str(SCENES / "lagrange3.toml")
+    assert cli.main(["section", scene, "--n", "2", "--t-end", "20", "--out", str(out)]) == 0
+    capsys.readouterr()
+    if _has_matplotlib():
+        assert (out / "section.png").is_file()
+    assert cli.main(["section", scene, "--n", "2", "--t-end", "20", "--value", "5", "--out", str(out)]) == 0
+    text = (out / "section.txt").read_text()
+    assert "crossings: 0" in text and "(no crossing: Gamma[-1] = 5 is not crossed" in text
+    assert not (out / "section.png").exists()
+    assert cli.main(["section", scene, "--n", "2", "--max-steps", "3", "--out", str(out), "--no-figures"]) == 1
+    captured = capsys.readouterr()
+    assert "failed: 2 of 2 trajectories failed; the first (index 0): max_steps reached" in captured.out
+    assert "Warning" not in captured.err
+    free = tmp_path / "free.toml"
+    free.write_text(FREE_BODY + "max_steps = 3\n")  # the scene's own bound reaches the tool
+    assert cli.main(["phase", str(free), "--out", str(tmp_path / "ph"), "--no-figures"]) == 1
+    assert "max_steps reached" in (tmp_path / "ph" / "phase.txt").read_text()
+    assert cli.main(["phase", str(free), "--max-steps", "100000", "--out", str(tmp_path / "ph"), "--no-figures"]) == 0
+    assert "|T - T'| = " in (tmp_path / "ph" / "phase.txt").read_text()
+
+
 @pytest.mark.parametrize("argv,says", [
     (["section", "--value", "nan"], "--value must be a finite number"),
     (["section", "--scale", "nan"], "--scale must be a finite number"),

@@ -435,6 +435,21 @@ def test_to_xarray():
     assert ds.attrs["algebra_name"] == "so(3)" and json.loads(ds.attrs["stats"])["method"] == "rkmk4"
     ens = ensemble(system, Omega0, T_SPAN, Gamma0=Gamma0, chunk_size=7, **FIXED).to_xarray()
     assert ens["status"].dims == ("batch_0", "batch_1")
+    # per-trajectory statistics are variables over the batch dims, event records over their own dimension
+    # (an audit: both were lost, or kept only as lists in the JSON attribute); the attribute is strict JSON
+    plane = ls.integrators.gamma_crossing(3, index=0)
+    sol = ls.integrate(system, Omega0, (0.0, 20.0), Gamma0=Gamma0, reconstruct=True, events=plane, **FIXED)
+    ds = sol.to_xarray()
+    assert ds["t_stop"].dims == ("batch_0", "batch_1") and np.array_equal(ds["failure"].values, sol.stats["failure"])
+    rec = sol.events[0]
+    assert rec.t.size > 0 and ds["event0_t"].dims == ("event0_crossing",)
+    for name in ("t", "index", "omega", "Gamma", "g"):
+        assert np.array_equal(ds[f"event0_{name}"].values, getattr(rec, name)), name
+    stats = json.loads(ds.attrs["stats"], parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
+    assert "t_stop" not in stats and stats["nfev"] == sol.stats["nfev"]
+    from liesuslov.xarray_io import _plain
+    assert json.dumps(_plain({"a": np.array([1.0, np.nan]), "b": np.float64(np.inf)}), allow_nan=False) == \
+        '{"a": [1.0, null], "b": null}'
 
 
 def test_to_xarray_without_xarray_names_the_extra(monkeypatch):

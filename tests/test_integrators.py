@@ -202,6 +202,28 @@ def test_save_load_round_trip(tmp_path):
     assert np.array_equal(back.status, sol.status)
 
 
+def test_load_names_a_damaged_or_foreign_file(tmp_path):
+    """A truncated, empty, foreign or non-npz file is a ValueError naming it (they were BadZipFile, EOFError,
+    KeyError '__meta__', TypeError, or numpy's advice to load it with pickle); a missing one a FileNotFoundError;
+    at() on a loaded Solution says that its dense output was not saved."""
+    system, Omega0, Gamma0 = kt_scene(4)
+    sol = ls.integrate(system, Omega0, (0.0, 1.0), Gamma0=Gamma0, method="rkmk45", dense_output=True)
+    good = sol.save(tmp_path / "run.npz").read_bytes()
+    (tmp_path / "cut.npz").write_bytes(good[: len(good) // 2])
+    (tmp_path / "empty.npz").write_bytes(b"")
+    (tmp_path / "text.npz").write_text("hello")
+    np.savez(tmp_path / "plain.npz", a=np.ones(3))
+    np.save(tmp_path / "array.npy", np.ones(3))
+    for name in ("cut.npz", "empty.npz", "text.npz", "plain.npz", "array.npy"):
+        with pytest.raises(ValueError, match=f"the file '.*{name}' is damaged or was not written by liesuslov") as info:
+            ls.Solution.load(tmp_path / name)
+        assert "allow_pickle" not in str(info.value)
+    with pytest.raises(FileNotFoundError, match="missing.npz' does not exist"):
+        ls.Solution.load(tmp_path / "missing.npz")
+    with pytest.raises(ValueError, match="one read by Solution.load keeps its arrays only"):
+        ls.Solution.load(tmp_path / "run.npz").at([0.5])
+
+
 def test_model_only_what_the_scene_needs():
     system, Omega0, Gamma0 = kt_scene(4)
     sol = ls.integrate(system, Omega0, (0.0, 0.5), Gamma0=Gamma0, h=0.1)

@@ -655,9 +655,13 @@ def test_section_helpers_and_direction_name_their_bad_arguments():
     with pytest.raises(ValueError, match="n must be an integer >= 2"):
         gamma_crossing(1)
     J = np.array([1.0, 2.0, 3.0])
-    with pytest.raises(ValueError, match="direction must be 1"):
+    with pytest.raises(TypeError, match="direction must be the integer 1"):  # a wrong type (was a ValueError)
         ls.poincare_section(free_body(J), coords3([0.3, 0.2, 1.0]), (0.0, 5.0), plane(omega=[0.0, 1.0, 0.0]),
                             direction=np.array([1, 1]))
+    for bad, exc in (("up", TypeError), (2, ValueError)):
+        with pytest.raises(exc, match="direction must be"):
+            ls.poincare_section(free_body(J), coords3([0.3, 0.2, 1.0]), (0.0, 5.0), plane(omega=[0.0, 1.0, 0.0]),
+                                direction=bad)
 
 
 def test_lyapunov_failure_says_when_and_why_and_long_runs_are_refused():
@@ -692,3 +696,42 @@ def test_lyapunov_progress_is_one_bar_over_the_intervals(capsys):
     assert shown == plain and "10/10" in err and err.count("lyapunov_exponent") >= 1 and "trajectory" not in err
     with pytest.raises(TypeError, match="progress must be True or False"):
         ls.lyapunov_exponent(top, [0.3, -0.5, 0.9], (0.0, 50.0), progress="yes", **kw)
+
+
+def test_phase_edge_cases_of_an_audit():
+    """Five defects an audit found, each failing before its fix.
+
+    The momentum is R's axis only for the free body: Kharlamova with M0 nearly antiparallel to Gamma0 flipped
+    between axis -Gamma0 ("momentum") and +Gamma0 at eps = 1e-8 / 1e-6 (and between tolerances). A slow free
+    body (|s0| 1e-6) was declared an equilibrium (the threshold was 1e-12 max(|s0|, 1), the message said
+    1e-12 |s0|). A tiny clockwise loop had a geometric phase of exactly 4 pi (np.mod rounding up), outside
+    [0, 4 pi). Near a homoclinic orbit the period at the defaults is 0.18 off while its closure is 2e-9:
+    period_error reports it. atol alone dropped rtol to integrate's 1e-8."""
+    S = C.kharlamova(np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.5])).system
+    alg, G0 = ls.so(3), np.array([1.0, 0.0, 0.0])
+    for eps in (1e-8, 1e-7, 1e-6):
+        om = np.zeros(3)
+        om[alg.index(0, 2)], om[alg.index(1, 2)] = eps, 0.6
+        ph = ls.reconstruction_phase(S, om, Gamma0=G0)
+        assert ph.axis_kind == "gamma" and np.array_equal(ph.axis, G0), (eps, ph.axis_kind, ph.axis)
+        assert ph.angle == pytest.approx(1.1997, abs=1e-3)
+    fb = free_body(np.array([1.0, 2.0, 3.0]))
+    with pytest.raises(ValueError, match="did not return .* within t_max") as info:
+        ls.reconstruction_phase(fb, coords3(1e-6 * np.array([0.3, 1.0, 0.2])))
+    assert "equilibrium" not in str(info.value)
+    with pytest.raises(ValueError, match="equilibrium"):  # a steady rotation still is one
+        ls.reconstruction_phase(fb, coords3([0.0, 1e-6, 0.0]))
+    for eps in (1e-9, 1e-10):
+        ph = ls.reconstruction_phase(fb, coords3([1.0, eps / 2, eps]), on_failure="nan")
+        assert ph.status == 0 and 0.0 <= ph.geometric_phase < 4.0 * np.pi, ph.geometric_phase
+    kh = C.kharlamova3([1.0, 2.0, 3.0], 1.0, 0.5).system  # w = (-0.6, 0, 0), Gamma = e1: a saddle
+    x = coords3([-0.6, 1e-6, 0.0])
+    loose, tight = (ls.reconstruction_phase(kh, x, Gamma0=G0, **o) for o in ({}, dict(rtol=1e-12, atol=1e-14)))
+    assert abs(loose.period - tight.period) > 0.1 and loose.period_error == pytest.approx(
+        abs(loose.period - tight.period), rel=1e-3)  # (two rtol 1e-12 runs differ by 1e-5 there)
+    assert tight.period_error == 0.0 and loose.closure < 1e-8
+    easy = ls.reconstruction_phase(fb, coords3([0.3, 1.0, 0.2]))
+    assert 0.0 < easy.period_error < 1e-8
+    assert ls.reconstruction_phase(fb, coords3([0.3, 1.0, 0.2]), period=5.0).period_error == 0.0
+    assert easy.stats["rtol"] == 1e-10
+    assert ls.reconstruction_phase(fb, coords3([0.3, 1.0, 0.2]), atol=1e-14).stats["rtol"] == 1e-10

@@ -677,6 +677,14 @@ def test_events_bad_input():
         ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 1.0), method="rkmk45", events=ev)
     with pytest.raises(ValueError, match="Gamma"):
         ls.integrate(system, [0.3, 1.0, 0.4], (0.0, 1.0), method="rkmk45", events=LinearEvent(Gamma=[0, 0, 1.0]))
+    # one value per trajectory: a () or (1,) for a batch of 3 was broadcast (every trajectory got the first one's
+    # value, and its crossings), (3, 1) was refused already; one trajectory may return one value in any shape
+    batch = np.array([[0.3, 1.0, 0.4], [0.2, -1.0, 0.5], [0.1, 0.9, -0.3]])
+    for bad in (lambda t, O, G, g: O[0, 0, 1], lambda t, O, G, g: O[:1, 0, 1], lambda t, O, G, g: O[:, :1, 1]):
+        with pytest.raises(ValueError, match=r"an event returns one value per trajectory: shape \(3,\)"):
+            ls.integrate(system, batch, (0.0, 1.0), method="rkmk45", events=bad)
+    one = ls.integrate(system, batch[0], (0.0, 1.0), method="rkmk45", events=lambda t, O, G, g: np.reshape(t - 0.5, 1))
+    assert one.events[0].t == pytest.approx([0.5], abs=1e-14)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

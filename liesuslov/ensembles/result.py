@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import json
 import math
-import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
+from .._io import read_npz
 from .constants import (
     _ARRAYS,
     _EVENT,
@@ -23,23 +23,15 @@ from .constants import (
 # ====================================================================== reading a shard
 @contextmanager
 def _read_shard(path: Path, run: str | None = None):
-    """``np.load`` of a store's shard, a damaged one (truncated, overwritten, not an .npz) a ValueError naming it,
-    and one written by another run than ``run`` (the manifest's id, when it has one) a ValueError too.
-
-    numpy's own message for a file that is not an .npz suggests ``allow_pickle=True``, which is wrong here: a
-    shard holds no object arrays. Reading a member lazily (``z[key]``) can fail as well, so the whole ``with``
-    body is covered: keep it to reading the shard.
-    """
+    """``np.load`` of a store's shard, a damaged one (truncated, overwritten, not an .npz) a ValueError naming it
+    (:func:`~liesuslov._io.read_npz`: keep the ``with`` body to reading the shard), and one written by another run
+    than ``run`` (the manifest's id, when it has one) a ValueError too."""
     other = run
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            other = _shard_run(z) if run is not None else None
-            if other == run:
-                yield z
-    except (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise ValueError(f"store {str(path.parent)!r}: the shard {path.name} is damaged or not written by ensemble "
-                         f"({type(exc).__name__} reading it); delete it (its trajectories then read as missing) "
-                         "or run the ensemble again with overwrite=True") from exc
+    with read_npz(path, f"store {str(path.parent)!r}: the shard {path.name}", "delete it (its trajectories then read "
+                  "as missing) or run the ensemble again with overwrite=True") as z:
+        other = _shard_run(z) if run is not None else None
+        if other == run:
+            yield z
     if other != run:  # (a chunk file without an id under a manifest with one: an older version wrote it)
         raise ValueError(f"store {str(path.parent)!r}: the shard {path.name} was written by another run than the "
                          "manifest's (two runs wrote this store at once, one of them with overwrite=True): its "

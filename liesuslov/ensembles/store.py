@@ -196,7 +196,7 @@ def open_ensemble(store) -> Ensemble:
     message = man.get("message", "")
     if missing:
         # (the manifest's message is a finished run's: its success is not this store's)
-        rest = "" if message == SUCCESS_MESSAGE else f" The run's message: {message}"
+        rest = "" if message in ("", SUCCESS_MESSAGE) else f" The run's message: {message}"
         message = (f"{len(missing)} of {len(bounds)} chunks missing from the store (status -1, values NaN); "
                    f"the run was interrupted or is still going, or a chunk file was removed.{rest}").strip()
     if missing or not man.get("complete"):

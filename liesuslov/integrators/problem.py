@@ -216,11 +216,11 @@ class Problem:
                             f"changes at the surface, not a boolean); got {type(value).__name__}"
                             + (f" of {raw.dtype}" if value is not None else ""))
         value = raw.astype(float, copy=False)
-        try:
-            value = np.broadcast_to(value, shape)
-        except ValueError:
+        # exactly one value per trajectory: a () or (1,) broadcast over a batch would give every trajectory the
+        # first one's value (its crossings at the first one's times)
+        if value.shape != shape and not (self.B == 1 and value.size == 1):
             raise ValueError(f"events[{e}] returned values of shape {value.shape}; an event returns one value per "
-                             f"trajectory: shape {shape} (the batch shape of the initial data)") from None
+                             f"trajectory: shape {shape} (the batch shape of the initial data)")
         return value.reshape(self.B)
 
     @property

@@ -89,7 +89,8 @@ class Solution:
             Without ``dense_output=True``, or for a time outside t_span.
         """
         if self._dense is None:
-            raise ValueError("sol.at(t) needs integrate(..., dense_output=True)")
+            raise ValueError("sol.at(t) needs the Solution of integrate(..., dense_output=True) (one read by "
+                             "Solution.load keeps its arrays only, not the dense output)")
         if self._dense is False:
             raise ValueError("sol.at(t): this Solution was pickled or copied while its problem does not pickle (a "
                              "lambda potential or event?): the copy keeps the arrays, not the dense output; call "
@@ -153,10 +154,14 @@ class Solution:
 
     @classmethod
     def load(cls, path) -> Solution:
-        """Read a file written by :meth:`save`."""
+        """Read a file written by :meth:`save` (a damaged or foreign file: ValueError naming it).
+
+        The arrays, statistics and event records come back; a dense output does not (``at`` needs the
+        Solution of ``integrate``, or one unpickled from it)."""
+        from .._io import read_npz
         from .events import EventRecord
 
-        with np.load(Path(path), allow_pickle=False) as data:
+        with read_npz(Path(path), f"the file {str(path)!r}", "load a file written by Solution.save") as data:
             arrays = {name: data[name] for name in _ARRAYS if name in data.files}
             meta = json.loads(str(data["__meta__"]))
             stats = {**meta["stats"], **{k[len(_STAT):]: data[k] for k in data.files if k.startswith(_STAT)}}
@@ -165,8 +170,8 @@ class Solution:
                 fields = {f: data[f"{_EVENT}{j}__{f}"] if f"{_EVENT}{j}__{f}" in data.files else None
                           for f in _EVENT_FIELDS}
                 events.append(EventRecord(**fields, n=meta["n"], algebra_name=meta["algebra_name"]))
-        return cls(**arrays, stats=stats, status=np.asarray(meta["status"], dtype=np.int64),
-                   message=meta["message"], n=meta["n"], algebra_name=meta["algebra_name"], events=events)
+            return cls(**arrays, stats=stats, status=np.asarray(meta["status"], dtype=np.int64),
+                       message=meta["message"], n=meta["n"], algebra_name=meta["algebra_name"], events=events)
 
     def to_xarray(self):
         """An ``xarray.Dataset``: dims ``time``, ``batch_0``..., components (needs ``liesuslov[xarray]``)."""

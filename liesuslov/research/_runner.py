@@ -34,15 +34,12 @@ def adaptive(method) -> bool | None:
 
 
 def options_with_defaults(options: dict) -> dict:
-    """The integrator options of a research tool: the contract's defaults unless any option is given.
+    """The integrator options of a research tool: each of ``method``, ``rtol``, ``atol`` the contract's default
+    (:data:`DEFAULT_OPTIONS`) unless given — ``atol=1e-14`` alone keeps ``rtol=1e-10``, not integrate's 1e-8.
 
     A fixed-step method without ``h`` is rejected here with the fix, before any work.
     """
-    opts = dict(options)
-    if not any(k in opts for k in ("method", "rtol", "atol", "h")):
-        opts.update(DEFAULT_OPTIONS)
-    else:
-        opts.setdefault("method", DEFAULT_OPTIONS["method"])
+    opts = {**DEFAULT_OPTIONS, **options}
     if adaptive(opts["method"]) is False and opts.get("h") is None:
         raise ValueError(f"h (the step size) is required by the fixed-step method {opts['method']!r}; pass h=..., "
                          "or leave method out to use the adaptive default rkmk853")

@@ -9,6 +9,7 @@ perturbed, the velocity rescaled to the scene's energy) and writes the crossings
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,7 @@ def add_section_arguments(p) -> None:
     p.add_argument("--index", type=int, default=-1, help="its component (default -1: the last)")
     p.add_argument("--value", type=float, default=0.0, help="the section is variable[index] = value (0)")
     p.add_argument("--direction", type=int, choices=(-1, 0, 1), default=1, help="crossing direction (1)")
+    _add_max_steps(p)
     p.add_argument("--no-figures", action="store_true", help="do not draw the figure")
 
 
@@ -38,24 +40,40 @@ def add_phase_arguments(p) -> None:
     p.add_argument("--out", metavar="DIR", default=None, help="output folder (default: the scene's, + /phase)")
     p.add_argument("--t-max", type=float, default=1000.0, metavar="T", help="search the return up to T (1000)")
     p.add_argument("--period", type=float, default=None, help="use this period instead of searching")
+    _add_max_steps(p)
     p.add_argument("--no-figures", action="store_true", help="do not draw the figure")
 
 
+def _add_max_steps(p) -> None:
+    p.add_argument("--max-steps", type=int, default=None, metavar="N",
+                   help="integrate(max_steps=N) for every integration of the tool (default: the scene's, else 10^7)")
+
+
 def _options(scene) -> dict[str, Any]:
-    """The scene's integrator options, or the research defaults for a fixed-step scene without h."""
+    """The scene's integrator options — its tolerances at most the research defaults' (1e-10, 1e-12) —, or the
+    research defaults for a fixed-step scene without h; the scene's form, backend and max_steps as they are."""
     from ._runner import adaptive
 
     own = adaptive(scene.method)
-    if own is False and scene.h is None:
-        return {}
-    opts: dict[str, Any] = {"method": scene.method, "chart": scene.chart}
-    if own:
-        opts.update(rtol=min(scene.rtol, 1e-10), atol=min(scene.atol, 1e-12))
-    else:
-        opts["h"] = scene.h
-    if scene.backend is not None:
-        opts["backend"] = scene.backend
+    opts: dict[str, Any] = {}
+    if own is not False or scene.h is not None:
+        opts.update(method=scene.method, chart=scene.chart)
+        if own:
+            opts.update(rtol=min(scene.rtol, 1e-10), atol=min(scene.atol, 1e-12))
+        else:
+            opts["h"] = scene.h
+    for name in ("backend", "max_steps"):
+        if getattr(scene, name) is not None:
+            opts[name] = getattr(scene, name)
+    if scene.form != "auto":
+        opts["form"] = scene.form
     return opts
+
+
+def _drop_stale(path: Path, written: bool) -> None:
+    """A figure a previous run left in the output folder goes when this run draws none (it would not match)."""
+    if not written:
+        path.unlink(missing_ok=True)
 
 
 def same_energy_states(system, omega0: np.ndarray, Gamma0: np.ndarray | None, N: int, seed: int, scale: float):
@@ -96,7 +114,7 @@ def run_section(args, load, user_error) -> int:
     """The ``section`` command (``load(path, **overrides)`` reads the scene; ``user_error`` its exception)."""
     from ..research import coordinate_plane, poincare_section
 
-    scene = load(args.scene, t_end=args.t_end)
+    scene = load(args.scene, t_end=args.t_end, max_steps=args.max_steps)
     system = scene.system
     if args.n < 1:
         raise user_error(f"--n must be >= 1, got {args.n}")
@@ -116,8 +134,10 @@ def run_section(args, load, user_error) -> int:
     except ValueError as exc:
         raise user_error(f"--index: {exc}") from exc
     omega, Gamma = same_energy_states(system, scene.omega0, scene.Gamma0, args.n, args.seed, args.scale)
-    rec = poincare_section(system, omega, scene.t_span, sec, Gamma0=Gamma, direction=args.direction,
-                           **_options(scene))
+    with warnings.catch_warnings():  # (a failure's RuntimeWarning: the report below says it, on one line)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        rec = poincare_section(system, omega, scene.t_span, sec, Gamma0=Gamma, direction=args.direction,
+                               **_options(scene))
     out = Path(args.out) if args.out else Path(scene.out_dir) / "section"
     out.mkdir(parents=True, exist_ok=True)
     arrays = {"t": rec.t, "index": rec.index, "omega": rec.omega}
@@ -133,14 +153,23 @@ def run_section(args, load, user_error) -> int:
             F0 = np.asarray(F(omega, Gamma))
             Fc = np.asarray(F(rec.omega, rec.Gamma))
             lines.append(f"max |{name} - {name}(0)| at the crossings: {float(np.max(np.abs(Fc - F0[rec.index]))):.3g}")
+    elif not np.any(rec.status < 0):
+        lines.append(f"(no crossing: {variable}[{args.index}] = {args.value:g} is not crossed in direction "
+                     f"{args.direction:+d} within t_span; choose another section with --variable, --index, --value "
+                     "or --direction, or a longer --t-end)")
+    if np.any(rec.status < 0):
+        lines.append(f"failed: {rec.message}")
     text = "\n".join(lines) + "\n"
     (out / "section.txt").write_text(text)
     print(text, end="")
     written = ["section.npz", "section.txt"]
-    if not args.no_figures and rec.t.size and _figure_section(system, rec, args.n, scene.name, out / "section.png"):
+    drawn = bool(not args.no_figures and rec.t.size
+                 and _figure_section(system, rec, args.n, scene.name, out / "section.png"))
+    _drop_stale(out / "section.png", drawn)
+    if drawn:
         written.append("section.png")
     print(f"wrote {out}/: {', '.join(written)}")
-    return 0
+    return 1 if np.any(rec.status < 0) else 0
 
 
 def _g(G, k):
@@ -187,7 +216,7 @@ def run_phase(args, load, user_error) -> int:
     """The ``phase`` command."""
     from ..research import reconstruction_phase
 
-    scene = load(args.scene)
+    scene = load(args.scene, max_steps=args.max_steps)
     system = scene.system
     if system.n is None:
         raise user_error(f"phase needs a matrix representation of {system.algebra.name}")
@@ -201,11 +230,12 @@ def run_phase(args, load, user_error) -> int:
         lines.append(f"no period: {ph.message}")
         text = "\n".join(lines) + "\n"
         (out / "phase.txt").write_text(text)
+        _drop_stale(out / "phase.png", False)
         print(text, end="")
         return 1
     lines += [f"period T = {float(ph.period):.15g}" + ("" if args.period is not None else
               f" (first return, relative distance {float(ph.return_distance):.3g}, {float(ph.closure):.3g} on the "
-              f"checking re-integration, {int(ph.crossings)} crossing(s))"),
+              f"checking re-integration, {int(ph.crossings)} crossing(s); |T - T'| = {float(ph.period_error):.3g})"),
               "monodromy R = g(0)^-1 g(T):", str(ph.monodromy),
               f"rotation angles of R's invariant planes: {np.array2string(ph.angles, precision=12)}"]
     if system.n == 3:
@@ -219,7 +249,9 @@ def run_phase(args, load, user_error) -> int:
     (out / "phase.txt").write_text(text)
     print(text, end="")
     written = ["phase.txt"]
-    if not args.no_figures and _figure_phase(scene, ph, out / "phase.png"):
+    drawn = bool(not args.no_figures and _figure_phase(scene, ph, out / "phase.png"))
+    _drop_stale(out / "phase.png", drawn)
+    if drawn:
         written.append("phase.png")
     print(f"wrote {out}/: {', '.join(written)}")
     return 0

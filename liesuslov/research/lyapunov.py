@@ -47,7 +47,9 @@ class LyapunovResult:
     history : ndarray, shape (K, ...)
         The running estimate ``lambda(t_k)``.
     spread : ndarray, shape (...)
-        ``max - min`` of the running estimate over the second half of the run: the convergence estimate.
+        ``max - min`` of the running estimate over the second half of the run: the convergence estimate (NaN
+        with fewer than 3 renormalisation intervals). It bounds the last oscillations, not a slow drift (a
+        measured case in ``docs/reconstruction.md``).
     log_t_over_t : float
         ``log(t1 - t0) / (t1 - t0)``: the size of the estimate an integrable (linearly shearing) motion
         leaves at this length.
@@ -139,14 +141,16 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
         vector from the seed and the bits of its own initial state ``(xi0, Gamma0)``, so a trajectory's
         exponent is the same alone or in any batch; None: fresh entropy (a different vector each call).
     renormalize_every : float, optional
-        ``tau``, the time between renormalisations (default about 5, dividing ``t1 - t0`` evenly: with
-        ``delta = 1e-7`` the separation stays in the linear regime for exponents up to ~2).
+        ``tau``, the time between renormalisations (default about 5; a given one is rounded to
+        ``(t1 - t0) / round((t1 - t0) / tau)``, so that the intervals divide ``t_span`` evenly — 4 over
+        ``t_span = (0, 10)`` is 5: with ``delta = 1e-7`` the separation stays in the linear regime for exponents
+        up to ~2).
     delta : float
         Separation of the companion trajectory (in the Euclidean metric of ``(xi, Gamma)``).
     return_history : bool
         Return a :class:`LyapunovResult` (the running estimate and its convergence) instead of the array.
     **options
-        ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``; ``progress=True``
+        ``integrate``'s options; ``method="rkmk853", rtol=1e-10, atol=1e-12`` where not given; ``progress=True``
         shows one bar over the renormalisation intervals (needs tqdm). Each interval
         is one ``integrate`` call on the batch of ``2B`` trajectories (reference and companion): ``max_steps``
         bounds each interval's steps, and a run has at most :data:`MAX_INTERVALS` intervals.
@@ -293,7 +297,8 @@ def lyapunov_exponent(system, Omega0, t_span, *, Gamma0=None, seed=None, renorma
             warnings.warn(f"lyapunov_exponent: {message}", RuntimeWarning, stacklevel=2)
         return lam
     half = hist[K // 2:]
-    spread = (np.max(half, axis=0) - np.min(half, axis=0)).reshape(b.shape)
+    # (one value in the second half, K < 3: no convergence estimate — it was 0, which reads as converged)
+    spread = (np.max(half, axis=0) - np.min(half, axis=0) if half.shape[0] > 1 else np.full(B, np.nan)).reshape(b.shape)
     times = t0 + span * np.arange(1, K + 1) / K
     return LyapunovResult(exponent=lam, times=times, history=hist.reshape((K,) + b.shape), spread=spread,
                           log_t_over_t=float(np.log(span) / span) if span > 1 else float("nan"),

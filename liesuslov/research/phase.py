@@ -66,6 +66,11 @@ class ReconstructionPhase:
         The same distance at the same return located on the checking re-integration (``rtol=1e-12``): the
         number compared with ``return_tol`` (the smallest over the checked candidates when none was
         accepted; NaN for a given period or when no crossing came within the screening tolerance).
+    period_error : ndarray, shape (...)
+        ``|T - T'|``, ``T'`` the same return's time on the checking re-integration: the error of the reported
+        period as integrated with the given options (0 when they are that tight, and for a given period;
+        NaN without a return). Near a homoclinic orbit it can be far above ``closure`` (Kharlamova n = 3 by
+        a saddle: 0.18 on a period of 68.84 at the defaults, with ``closure`` 2e-9).
     crossings : ndarray of int, shape (...)
         Section crossings examined (0 for a given period).
     axis_kind : ndarray of str, shape (...)
@@ -82,6 +87,7 @@ class ReconstructionPhase:
     status: np.ndarray
     return_distance: np.ndarray
     closure: np.ndarray
+    period_error: np.ndarray
     crossings: np.ndarray
     axis_kind: np.ndarray
     message: str = ""
@@ -216,7 +222,9 @@ def solid_angle(u, dt: float | np.ndarray, p=None) -> np.ndarray:
     T = np.asarray(dt) * N
     du = du * (2.0 * np.pi / T)[..., None] if np.ndim(T) else du * (2.0 * np.pi / T)
     integrand = np.sum(p * np.cross(u, du), axis=-1) / (1.0 + np.sum(p * u, axis=-1))
-    return np.mod(np.sum(integrand, axis=0) * dt, 4.0 * np.pi)
+    area = np.mod(np.sum(integrand, axis=0) * dt, 4.0 * np.pi)
+    # np.mod rounds a tiny negative area (a small clockwise loop) up to 4 pi itself: that is 0
+    return np.where(area >= 4.0 * np.pi, 0.0, area)
 
 
 # ------------------------------------------------------------------------------------- the tool
@@ -268,7 +276,7 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
     samples : int
         Points per period for the geometric phase of the free body.
     **options
-        ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``. The reported
+        ``integrate``'s options; ``method="rkmk853", rtol=1e-10, atol=1e-12`` where not given. The reported
         period, monodromy and angles come from this integration (the re-integration only checks it).
 
     Returns
@@ -306,6 +314,7 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
     s0 = b.reduced(b.omega, b.Gamma)
     scale = np.maximum(np.linalg.norm(s0, axis=-1), np.finfo(float).tiny)
     T = np.full(B, np.nan)
+    T_check = np.full(B, np.nan)       # the same return's time on the checking re-integration
     Rm = np.full((B, m, m), np.nan)
     Rt = np.full((B, m, m), np.nan)     # the monodromy of the checking re-integration
     status = np.zeros(B, dtype=int)
@@ -315,8 +324,8 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
     want_axes = m == 3 and system.is_so
     why = np.full(B, "", dtype=object)  # why a trajectory failed (integrate's reason) or has no period
     if period is None:
-        _search(system, b, s0, scale, return_tol, screen, t_max, opts, tight, T, Rm, Rt, status, dist, closure,
-                count, why, on_failure == "raise")
+        _search(system, b, s0, scale, return_tol, screen, t_max, opts, tight, T, T_check, Rm, Rt, status, dist,
+                closure, count, why, on_failure == "raise")
     else:
         P = _period(period, b.shape)
         ident = np.broadcast_to(np.eye(m), (B, m, m)).copy()
@@ -324,7 +333,7 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
             rows = np.nonzero(P == val)[0]
             G = None if b.Gamma is None else b.Gamma[rows]
             g_end, st, why_rows = R.run_plain(system, b.omega[rows], G, ident[rows], (0.0, float(val)), opts)
-            T[rows] = val
+            T[rows] = T_check[rows] = val
             Rm[rows] = g_end
             status[rows] = np.where(st < 0, -1, 0)
             why[rows] = why_rows
@@ -351,7 +360,8 @@ def reconstruction_phase(system, Omega0, *, Gamma0=None, g0=None, period=None, t
         period=T.reshape(shp), monodromy=Rm.reshape(shp + (m, m)), angles=angles.reshape(shp + (m // 2,)),
         axis=axis.reshape(shp + (3,)), angle=angle.reshape(shp), dynamic_phase=dyn.reshape(shp),
         geometric_phase=geo.reshape(shp), status=status.reshape(shp), return_distance=dist.reshape(shp),
-        closure=closure.reshape(shp), crossings=count.reshape(shp), axis_kind=kind.astype(str).reshape(shp),
+        closure=closure.reshape(shp), period_error=np.abs(T - T_check).reshape(shp), crossings=count.reshape(shp),
+        axis_kind=kind.astype(str).reshape(shp),
         message=message,
         stats={"return_tol": return_tol, "screen_tol": screen, "t_max": t_max,
                "check": dict(opts) if tight is None else tight, **opts})
@@ -399,8 +409,8 @@ def _message(status, dist, closure, t_max, tol, tight, why) -> str:
         else:
             closest = "; the section through the initial state was never crossed again"
         parts.append(f"{nr} trajectory(ies) did not return to the initial reduced state within t_max = {t_max:g} "
-                     f"(return_tol = {tol:.3g}){closest}: the motion is not periodic (asymptotic or "
-                     "quasi-periodic), or raise t_max")
+                     f"(the first: flat index {int(np.flatnonzero(wait)[0])}; return_tol = {tol:.3g}){closest}: the "
+                     "motion is not periodic (asymptotic or quasi-periodic), or raise t_max")
     nf = int(np.sum(status == -1))
     if nf:
         k = int(np.flatnonzero(status == -1)[0])
@@ -421,6 +431,7 @@ class _Check:
         self.g = np.eye(m)[None]
         self.crossings: list[tuple[float, float, np.ndarray]] = []
         self.failed = False
+        self.why = ""  # integrate's reason and time when it failed
         self.size = 0.0  # the orbit's size so far: the largest sampled |s(t) - s0| / |s0|
 
     def advance(self, system, b, plane, s0, scale, t_min, t_end, tight) -> None:
@@ -439,6 +450,7 @@ class _Check:
             self.crossings.append((float(cr.t[j]), float(np.linalg.norm(s - s0) / scale), cr.g[j]))
         if win.status[0] < 0:
             self.failed = True
+            self.why = str(win.why[0])
             return
         self.t, self.omega, self.g = t_end, win.omega, win.g
         self.Gamma = win.Gamma
@@ -456,7 +468,7 @@ class _Check:
 CHECK_WINDOW = 1e-2
 
 
-def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, status, dist, closure,
+def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, T_check, Rm, Rt, status, dist, closure,
             count, why, raise_still: bool) -> None:
     """Per trajectory, windows of doubling length until it has returned, failed or reached t_max.
 
@@ -467,7 +479,7 @@ def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, st
     m = system.n
     xdot, Gdot = system.rhs(b.omega, b.Gamma)
     speed = np.sqrt(np.sum(xdot ** 2, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot ** 2, axis=-1)))
-    still = speed <= R.STILL * np.maximum(scale, 1.0)
+    still = speed <= R.STILL * scale  # (relative: a slow motion of a small state is not an equilibrium)
     off = np.sum(xdot * b.omega, axis=-1) + (0.0 if Gdot is None else np.sum(Gdot * b.Gamma, axis=-1))
     # an equilibrium's plane has no normal (a zero velocity); it is never integrated: any normal stands in
     normal = np.where(still[:, None] & (np.arange(xdot.shape[-1]) == 0), 1.0, xdot)
@@ -520,7 +532,8 @@ def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, st
                     found = chk.near(float(cr.t[j]), CHECK_WINDOW * float(cr.t[j]))
                     if found is None and chk.failed:
                         status[k] = -1
-                        why[k] = "the checking re-integration of a candidate return failed"
+                        why[k] = (f"the checking re-integration (rtol {tight['rtol']:g}) of the candidate return at "
+                                  f"t = {float(cr.t[j]):.6g} failed: {chk.why}")
                         done[loc] = True
                         continue
                 if found is None:
@@ -531,6 +544,7 @@ def _search(system, b, s0, scale, tol, screen, t_max, opts, tight, T, Rm, Rt, st
                 size = np.inf if tight is None else checks[k].size
                 if found[1] <= tol and (found[1] <= ORBIT_CLOSURE * size or found[1] <= CLOSURE_FLOOR):
                     T[k], Rm[k], Rt[k], dist[k], closure[k], status[k] = cr.t[j], cr.g[j], found[2], d, found[1], 0
+                    T_check[k] = found[0]
                     done[loc] = True
             failed = (win.status < 0) & ~done
             status[rows[failed]] = -1
@@ -556,7 +570,7 @@ def _vec3(x: np.ndarray) -> np.ndarray:
 
 
 def _axes(system, b, Rm, Rt, ok, axis, angle, kind) -> None:
-    """n = 3: the axis (M0, else Gamma0, else R's own) and the signed angle about it.
+    """n = 3: the axis (M0 for the free body, else Gamma0, else R's own) and the signed angle about it.
 
     ``R`` fixes the unit vector ``u`` when ``|R u - u| <= FIX_FLOOR + FIX_FACTOR eps``, ``eps = |R - Rt|_2`` the
     error of ``R`` estimated by the checking re-integration ``Rt``: an exactly fixed vector is moved by at
@@ -564,12 +578,15 @@ def _axes(system, b, Rm, Rt, ok, axis, angle, kind) -> None:
     """
     M0 = _vec3(system.inertia(b.omega))
     nM = np.linalg.norm(M0, axis=-1)
+    # the momentum is an axis of R only where it is conserved (the free body): elsewhere R may fix M0 by
+    # coincidence (Kharlamova with M0 ~ -3 Gamma0), and the axis would flip between nearby states
+    free = _is_free_body(system)
     for k in np.nonzero(ok)[0]:
         Rk = Rm[k]
         eps = float(np.linalg.norm(Rk - Rt[k], 2)) if np.all(np.isfinite(Rt[k])) else 0.0
         fix_tol = FIX_FLOOR + FIX_FACTOR * eps
         cands = []
-        if nM[k] > 0:
+        if free and nM[k] > 0:
             cands.append(("momentum", M0[k] / nM[k]))
         if b.Gamma is not None:
             cands.append(("gamma", b.Gamma[k]))

@@ -69,7 +69,7 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
         surface: its own ``direction`` and ``terminal`` attributes (an event of ``integrate`` reused here) are
         not read — this argument decides, and every crossing over ``t_span`` is collected.
     **options
-        ``integrate``'s options; without any, ``method="rkmk853", rtol=1e-10, atol=1e-12``.
+        ``integrate``'s options; ``method="rkmk853", rtol=1e-10, atol=1e-12`` where not given.
 
     Returns
     -------
@@ -82,8 +82,9 @@ def poincare_section(system, Omega0, t_span, section, *, Gamma0=None, g0=None, d
     >>> rec = poincare_section(system, Omega0, (0.0, 500.0), gamma_crossing(3), Gamma0=Gamma0)  # doctest: +SKIP
     >>> rec.Gamma[rec.index == 0]                                                               # doctest: +SKIP
     """
-    if isinstance(direction, (bool, np.bool_)) or not isinstance(direction, (int, np.integer)) or \
-            direction not in (-1, 0, 1):
+    if isinstance(direction, (bool, np.bool_)) or not isinstance(direction, (int, np.integer)):
+        raise TypeError(f"direction must be the integer 1 (upwards), -1 (downwards) or 0 (both), got {direction!r}")
+    if direction not in (-1, 0, 1):
         raise ValueError(f"direction must be 1 (upwards), -1 (downwards) or 0 (both), got {direction!r}")
     if not callable(section):
         raise TypeError(f"section must be a callable section(t, Omega, Gamma, g) or a linear event (ls.research."
