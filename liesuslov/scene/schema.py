@@ -64,6 +64,8 @@ def _describe(v: Any) -> str:
     if isinstance(v, list):
         s = _shape_of(v)
         if s is None:
+            if v and all(isinstance(e, str) for e in v):
+                return f"a list of {len(v)} string{'s' if len(v) != 1 else ''}"
             if any(isinstance(e, (str, bool, dict)) for e in v):
                 return "a list that contains something other than numbers"
             return "nested lists of unequal lengths"
