@@ -207,6 +207,20 @@ def test_target_summary_from_measurements():
     assert "## Targets" in text and "max |floor − library| = 1.0e-15" in text
 
 
+def test_the_cold_start_target_says_whether_the_kernel_was_compiled_at_install():
+    """(f): the first compiled call after installation is the measured value; the detail says whether it loaded
+    the kernel the build compiled (and what that step took) or compiled it, and what compiling it costs."""
+    row = {"target": "f", "import_s": 0.1, "import_runs": 3, "first_call_s": 0.5, "precompiled": True,
+           "first_call_compiling_s": 28.0, "first_call_cached_s": 0.5, "precompile_s": 61.0, "compile_status": "ok"}
+    by = {t["target"]: t for t in targets.summary([row], {}, [], [])}
+    f = by["f (compile)"]
+    assert f["value"] == 0.5 and f["met"]
+    assert "loaded the kernel compiled at install" in f["detail"] and "61 s" in f["detail"]
+    assert "compiling it in the call instead (LIESUSLOV_PRECOMPILED=off): 28 s" in f["detail"]
+    row.update(first_call_s=28.0, precompiled=False, first_call_compiling_s=28.0)
+    f = {t["target"]: t for t in targets.summary([row], {}, [], [])}["f (compile)"]
+    assert not f["met"] and "no kernel compiled at install" in f["detail"]
+
 def test_floor_runs_the_librarys_so4_dexpinv():
     """The n = 4 floor ran the closed-form so(3) dexp⁻¹ on each factor where the library's so(4) kind runs the
     series to ad² (an audit: 1.84 -> 2.22 of the floor). At h = 0.005 the two differ below the agreement tolerance,

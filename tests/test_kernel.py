@@ -578,6 +578,82 @@ def test_the_cache_is_stamped_with_every_kernel_source(tmp_path):
 
 
 
+def test_the_precompiled_kernel_is_read_first_and_written_only_while_precompiling(tmp_path, monkeypatch):
+    """_KernelCacheFile: a function's compiled code is looked up in the installation's precompiled directory,
+    then in numba's own cache; a compilation goes to numba's own cache, or only to the precompiled directory
+    while the build precompiles (LIESUSLOV_PRECOMPILED=write, where numba's own cache is not read either);
+    LIESUSLOV_PRECOMPILED=off reads numba's own cache alone; an entry stamped with other kernel sources is not
+    read (stale)."""
+    from liesuslov.integrators.kernel import common
+
+    pre, own = tmp_path / "precompiled", tmp_path / "own"
+    own.mkdir()
+    monkeypatch.setattr(common, "PRECOMPILED_DIR", pre)
+    key = ("sig", ("triple", "cpu", "features"), ("code", ""))
+
+    def files(setting, stamp=b"kernel sources"):
+        if setting is None:
+            monkeypatch.delenv(common.PRECOMPILED_ENV, raising=False)
+        else:
+            monkeypatch.setenv(common.PRECOMPILED_ENV, setting)
+        return common._KernelCacheFile(str(own), "f-1.py311", stamp)
+
+    files(None).save(key, "compiled here")
+    assert not pre.exists() and files(None).load(key) == "compiled here"
+    assert files("write").load(key) is None  # precompiling reads the precompiled directory alone
+    files("write").save(key, "compiled by the build")  # (creates the directory)
+    assert files(None).load(key) == "compiled by the build"  # read first
+    assert files("off").load(key) == "compiled here"
+    assert files(None, stamp=b"changed sources").load(key) is None  # both stale
+    (own / "f-1.py311.nbi").unlink()
+    assert files(None).load(key) == "compiled by the build"
+    assert files("off").load(key) is None
+
+
+@pytest.mark.slow
+def test_a_precompiled_kernel_is_loaded_where_the_package_is_installed(tmp_path):
+    """The build's precompile step (warm with LIESUSLOV_PRECOMPILED=write) on a copy of the package, then a first
+    call from that copy in a fresh process with an empty numba cache: the loop is loaded from the precompiled
+    directory (a cache hit, no compilation), which is found beside the package wherever it lies."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import liesuslov
+    from liesuslov.integrators.kernel import common
+
+    built = tmp_path / "built"
+    shutil.copytree(Path(liesuslov.__file__).parent, built / "liesuslov",
+                    ignore=shutil.ignore_patterns("__pycache__", "_precompiled"))
+    env = {k: v for k, v in os.environ.items() if k != "LIESUSLOV_KERNEL_COMPILE_HERE"}
+
+    def run(code, root, numba_cache, **extra):  # a fresh process with its own (empty) numba cache
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900,
+                              check=False, cwd=tmp_path, env={**env, "PYTHONPATH": str(root),
+                                                              "NUMBA_CACHE_DIR": str(tmp_path / numba_cache), **extra})
+
+    res = run("from liesuslov.integrators.kernel.warm import compile_kinds; compile_kinds(['none'])", built,
+              "numba-build", LIESUSLOV_PRECOMPILED="write")
+    assert res.returncode == 0, res.stderr[-2000:]
+    precompiled = built / "liesuslov" / common.PRECOMPILED_DIR.relative_to(Path(liesuslov.__file__).parent)
+    assert any(precompiled.glob("loop._solve_one-*.nbi"))
+    moved = tmp_path / "installed"
+    shutil.move(built, moved)  # the package elsewhere, as a wheel's files are
+    probe = ("from liesuslov.integrators.kernel.warm import run_kind; from liesuslov.integrators.kernel import loop; "
+             "b = run_kind('none'); s = loop._solve_one.stats; print(b, len(s.cache_hits), len(s.cache_misses), "
+             "loop.__file__)")
+    res = run(probe, moved, "numba-first")
+    backend, hits, misses, where = res.stdout.split()
+    assert res.returncode == 0 and (backend, hits, misses) == ("numba", "1", "0"), res.stderr[-2000:]
+    assert where.startswith(str(moved))
+    compiled_into = lambda name: any((tmp_path / name).rglob("loop._solve_one-*.nbi"))  # noqa: E731
+    assert not compiled_into("numba-build") and not compiled_into("numba-first")
+    res = run(probe, moved, "numba-off", LIESUSLOV_PRECOMPILED="off")  # the compilation itself, not the directory
+    assert res.returncode == 0 and res.stdout.split()[:3] == ["numba", "1", "0"], res.stderr[-2000:]
+    assert compiled_into("numba-off")
+
+
 @pytest.mark.slow
 def test_the_first_compilation_prints_no_numba_warning(tmp_path):
     """The closed-form family's first compilation printed numba's NumbaIRAssumptionWarning ("variable ... is not

@@ -110,7 +110,8 @@ class BenchConfig:
     import_runs : int
         Fresh processes timing ``import liesuslov`` (the fastest counts).
     cold_compile : bool
-        Also time the first compiled call in fresh processes (an empty numba cache: a full compilation).
+        Also time the first compiled call in fresh processes with an empty numba cache (as installed, and
+        compiling the kernel itself) and the build's precompile step.
     preset : str
         ``"full"``, ``"quick"`` or a name of your own (reported).
     """

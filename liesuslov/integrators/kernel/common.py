@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 from numba import njit, types
@@ -49,8 +50,49 @@ KERNEL_SOURCES = tuple(sorted([*(p for p in (_PACKAGE / "integrators" / "kernel"
 _STAMP = sources_stamp(KERNEL_SOURCES)
 
 
+#: The kernel as the installation compiled it (:mod:`.warm`, run by the build: ``build_backend/``), beside this
+#: file; read before numba's own cache. It holds a function only for the numba version, CPU and kernel sources
+#: it was compiled with (numba's index key and :data:`_STAMP`): anything else finds nothing there and compiles.
+PRECOMPILED_DIR = Path(__file__).resolve().with_name("_precompiled")
+#: ``write``: the kernel's functions are read from and written to :data:`PRECOMPILED_DIR` only (the build's
+#: precompile step); ``off``: it is not read (a measurement of the compilation itself); unset: read first.
+PRECOMPILED_ENV = "LIESUSLOV_PRECOMPILED"
+
+
+class _KernelCacheFile:
+    """The index and data files of one kernel function: those of :data:`PRECOMPILED_DIR`, then numba's own
+    (one :class:`~numba.core.caching.IndexDataCacheFile` each); a new compilation is written to numba's own
+    place, or to :data:`PRECOMPILED_DIR` while the build precompiles (:data:`PRECOMPILED_ENV` ``write``)."""
+
+    def __init__(self, cache_path: str, filename_base: str, source_stamp: bytes):
+        setting = os.environ.get(PRECOMPILED_ENV, "")
+        precompiled = IndexDataCacheFile(cache_path=str(PRECOMPILED_DIR), filename_base=filename_base,
+                                         source_stamp=source_stamp)
+        own = IndexDataCacheFile(cache_path=cache_path, filename_base=filename_base, source_stamp=source_stamp)
+        self._writing_precompiled = setting == "write"
+        self._write = precompiled if self._writing_precompiled else own
+        self._read = (precompiled,) if self._writing_precompiled else (own,) if setting == "off" else (precompiled, own)
+        self._source_stamp = source_stamp
+
+    def load(self, key):
+        for files in self._read:
+            data = files.load(key)
+            if data is not None:
+                return data
+        return None
+
+    def save(self, key, data) -> None:
+        if self._writing_precompiled:
+            PRECOMPILED_DIR.mkdir(exist_ok=True)
+        self._write.save(key, data)
+
+    def flush(self) -> None:
+        self._write.flush()
+
+
 class _KernelCache(FunctionCache):
-    """numba's on-disk cache of one function, fresh only while *every* kernel source is unchanged.
+    """numba's on-disk cache of one function, fresh only while *every* kernel source is unchanged, read first
+    from the installation's precompiled kernel (:class:`_KernelCacheFile`).
 
     numba stamps a cached function with its own file's contents, but a compiled caller embeds its callees'
     code: after a change in a callee's file alone (``groups/so3.py`` under the loop of ``loop.py``), numba
@@ -59,8 +101,7 @@ class _KernelCache(FunctionCache):
 
     def __init__(self, py_func):
         super().__init__(py_func)
-        self._cache_file = IndexDataCacheFile(cache_path=self._cache_path, filename_base=self._impl.filename_base,
-                                              source_stamp=_STAMP)
+        self._cache_file = _KernelCacheFile(self._cache_path, self._impl.filename_base, _STAMP)
 
 
 def _jit(fn, entry: bool = False):

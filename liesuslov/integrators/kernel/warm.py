@@ -14,7 +14,11 @@ Each process runs one short integration of its kind through the front door (so e
 first call compiles is compiled) and the cache decides the rest: a kind already cached costs a process
 start and a cache load.
 
-A user's first call of a family that is not in the cache compiles it the same way, in one child process
+Installing the package runs this module (``build_backend/liesuslov_build.py``) with ``LIESUSLOV_PRECOMPILED=write``:
+every family goes into the package's precompiled directory (:data:`~.common.PRECOMPILED_DIR`), read before numba's
+cache, so that a first call loads it; what is written here otherwise goes to numba's own cache.
+
+A user's first call of a family that neither holds compiles it the same way, in one child process
 (:func:`~.wrapper._compiled`), then loads it from the cache: the loop loaded from numba's cache runs faster
 than the same loop compiled in the calling process (measured: an so(3) RKMK4 step 0.58 -> 0.34 µs, 4.3 -> 2.6×
 the plain loop; numba issue #10617 reports the same effect), and the compiler's ~10⁶ Python objects do
