@@ -608,6 +608,8 @@ def test_the_precompiled_kernel_is_read_first_and_written_only_while_precompilin
     (own / "f-1.py311.nbi").unlink()
     assert files(None).load(key) == "compiled by the build"
     assert files("off").load(key) is None
+    with pytest.raises(ValueError, match="LIESUSLOV_PRECOMPILED must be 'write', 'off' or unset, got '0'"):
+        files("0")
 
 
 @pytest.mark.slow

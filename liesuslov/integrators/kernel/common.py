@@ -66,6 +66,9 @@ class _KernelCacheFile:
 
     def __init__(self, cache_path: str, filename_base: str, source_stamp: bytes):
         setting = os.environ.get(PRECOMPILED_ENV, "")
+        if setting not in ("", "write", "off"):
+            raise ValueError(f"the environment variable {PRECOMPILED_ENV} must be 'write', 'off' or unset, got "
+                             f"{setting!r}")
         precompiled = IndexDataCacheFile(cache_path=str(PRECOMPILED_DIR), filename_base=filename_base,
                                          source_stamp=source_stamp)
         own = IndexDataCacheFile(cache_path=cache_path, filename_base=filename_base, source_stamp=source_stamp)
