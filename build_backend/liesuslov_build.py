@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -87,12 +88,12 @@ def _precompile(config_settings) -> None:
     root = str(Path.cwd())
     with tempfile.TemporaryDirectory(prefix="liesuslov-build-numba-") as scratch:
         # numba's own cache (functions outside the kernel) goes to scratch, not into the source tree
+        # (LIESUSLOV_PRECOMPILED: liesuslov.integrators.kernel.common.PRECOMPILED_ENV, not importable here)
         env = {**os.environ, "LIESUSLOV_PRECOMPILED": "write", "NUMBA_CACHE_DIR": scratch,
                "PYTHONPATH": os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)}
         print("liesuslov: compiling the kernel (numba; LIESUSLOV_PRECOMPILE=0 skips this) ...", file=sys.stderr)
         try:
-            res = subprocess.run([sys.executable, "-m", "liesuslov.integrators.kernel.warm"], cwd=root, env=env,
-                                 capture_output=True, text=True, timeout=_TIMEOUT, check=False)
+            res = _run([sys.executable, "-m", "liesuslov.integrators.kernel.warm"], cwd=root, env=env)
         except (OSError, subprocess.TimeoutExpired) as exc:
             res, why = None, str(exc)
         else:
@@ -103,6 +104,23 @@ def _precompile(config_settings) -> None:
     shutil.rmtree(target, ignore_errors=True)
     print(f"liesuslov: the kernel was not compiled at install ({why}); its first call will compile it",
           file=sys.stderr)
+
+
+def _run(cmd: list[str], cwd: str, env: dict) -> subprocess.CompletedProcess:
+    """``cmd`` to its end, or killed with every process it started (the compilers of :mod:`.warm`) after
+    :data:`_TIMEOUT` seconds (TimeoutExpired)."""
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # (its own process group: killed as a whole)
+    try:
+        out, err = proc.communicate(timeout=_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        if hasattr(os, "killpg"):
+            os.killpg(proc.pid, signal.SIGKILL)
+        else:
+            proc.kill()
+        proc.communicate()
+        raise
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
 
 
 def build_wheel(wheel_directory, config_settings=None, metadata_directory=None):

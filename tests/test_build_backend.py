@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -56,13 +58,13 @@ def test_a_failed_precompile_step_leaves_no_compiled_code_and_the_build_goes_on(
     (target / "stale.nbi").write_text("from an earlier build")
     seen = {}
 
-    def run(cmd, **kw):
-        seen.update(cmd=cmd, env=kw["env"], stale=(target / "stale.nbi").exists())
+    def run(cmd, cwd, env):
+        seen.update(cmd=cmd, env=env, stale=(target / "stale.nbi").exists())
         target.mkdir(parents=True, exist_ok=True)
         (target / "half.nbi").write_text("a family compiled before the failure")
         return subprocess.CompletedProcess(cmd, 1, "", "numba.core.errors.TypingError: something\n")
 
-    monkeypatch.setattr(backend.subprocess, "run", run)
+    monkeypatch.setattr(backend, "_run", run)
     backend._precompile(None)
     assert seen["cmd"][1:] == ["-m", "liesuslov.integrators.kernel.warm"]
     assert seen["env"]["LIESUSLOV_PRECOMPILED"] == "write" and not seen["stale"]
@@ -70,15 +72,31 @@ def test_a_failed_precompile_step_leaves_no_compiled_code_and_the_build_goes_on(
     assert not target.exists()
     assert "not compiled at install (numba.core.errors.TypingError: something)" in capsys.readouterr().err
 
-    def compiled(cmd, **kw):
+    def compiled(cmd, cwd, env):
         target.mkdir(parents=True)
         (target / "new.nbi").write_text("compiled")
         return subprocess.CompletedProcess(cmd, 0, "all 1 s", "")
 
-    monkeypatch.setattr(backend.subprocess, "run", compiled)
+    monkeypatch.setattr(backend, "_run", compiled)
     backend._precompile(None)
     assert (target / "new.nbi").exists() and "kernel compiled" in capsys.readouterr().err
     seen.clear()
-    monkeypatch.setattr(backend.subprocess, "run", lambda cmd, **kw: seen.update(called=True))
+    monkeypatch.setattr(backend, "_run", lambda cmd, cwd, env: seen.update(called=True))
     backend._precompile({"precompile": "false"})
     assert not seen and (target / "new.nbi").exists()  # switched off: nothing run, nothing removed
+
+
+def test_a_precompile_step_beyond_its_time_is_killed_with_the_processes_it_started(backend, monkeypatch, tmp_path):
+    """_run: past the time limit the step's whole process group goes (warm's compilers with it), no hang."""
+    monkeypatch.setattr(backend, "_TIMEOUT", 1.0)
+    marker = tmp_path / "grandchild-alive"
+    grandchild = tmp_path / "grandchild.py"
+    grandchild.write_text(f"import time\ntime.sleep(3)\nopen({str(marker)!r}, 'w').close()\n")
+    child = tmp_path / "child.py"
+    child.write_text(f"import subprocess, sys, time\nsubprocess.Popen([sys.executable, {str(grandchild)!r}])\n"
+                     "time.sleep(60)\n")
+    script = str(child)
+    with pytest.raises(subprocess.TimeoutExpired):
+        backend._run([sys.executable, script], cwd=str(tmp_path), env=dict(os.environ))
+    time.sleep(4)
+    assert not marker.exists()  # the grandchild was killed with its parent
