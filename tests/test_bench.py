@@ -221,6 +221,7 @@ def test_the_cold_start_target_says_whether_the_kernel_was_compiled_at_install()
     f = {t["target"]: t for t in targets.summary([row], {}, [], [])}["f (compile)"]
     assert not f["met"] and "no kernel compiled at install" in f["detail"]
 
+
 def test_floor_runs_the_librarys_so4_dexpinv():
     """The n = 4 floor ran the closed-form so(3) dexp⁻¹ on each factor where the library's so(4) kind runs the
     series to ad² (an audit: 1.84 -> 2.22 of the floor). At h = 0.005 the two differ below the agreement tolerance,

@@ -577,7 +577,6 @@ def test_the_cache_is_stamped_with_every_kernel_source(tmp_path):
     assert common.sources_stamp([a, b]) != before
 
 
-
 def test_the_precompiled_kernel_is_read_first_and_written_only_while_precompiling(tmp_path, monkeypatch):
     """_KernelCacheFile: a function's compiled code is looked up in the installation's precompiled directory,
     then in numba's own cache; a compilation goes to numba's own cache, or only to the precompiled directory
